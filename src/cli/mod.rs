@@ -1,0 +1,99 @@
+//! The `dpmp` command line: one subcommand group per stage of the data flow.
+//!
+//! Every subcommand is a thin shell over a library call: it parses flags
+//! (clap), loads inputs, calls the library and prints JSON (or a table).
+//! Errors go to stderr; the exit code is 2 for invalid input and 1 for any
+//! other failure.
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+pub mod bench;
+pub mod data;
+pub mod eval;
+pub mod optimize;
+pub mod plan;
+pub mod prior;
+pub mod robot;
+pub mod serve;
+pub mod train;
+
+/// dPMP: learned ProMP priors and constrained trajectory optimisation for
+/// selective strawberry harvesting with a Franka Panda.
+#[derive(Debug, Parser)]
+#[command(name = "dpmp", version, about, long_about = None)]
+pub struct Cli {
+    /// The subcommand to run.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// Top-level subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Inspect and plot ProMP priors (the paper's annotation format).
+    #[command(subcommand)]
+    Prior(prior::PriorCommand),
+    /// Robot kinematics and clearance queries.
+    #[command(subcommand)]
+    Robot(robot::RobotCommand),
+    /// Optimise a trajectory for a request file (the HTTP request schema).
+    Optimize(optimize::OptimizeArgs),
+    /// Generate and summarise synthetic datasets.
+    #[command(subcommand)]
+    Data(data::DataCommand),
+    /// Train a dPMP network.
+    Train(train::TrainArgs),
+    /// Evaluate a trained network (the paper's tables).
+    Eval(eval::EvalArgs),
+    /// Plan from an image: network prior, then the optimiser.
+    Plan(plan::PlanArgs),
+    /// Run the HTTP service.
+    Serve(serve::ServeArgs),
+    /// Run offline benchmarks.
+    Bench(bench::BenchArgs),
+}
+
+/// Parse the command line, run it, and map errors to exit codes.
+pub fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli.command) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("error: {err}");
+            match err {
+                crate::Error::Invalid { .. } => ExitCode::from(2),
+                _ => ExitCode::from(1),
+            }
+        }
+    }
+}
+
+/// Run one parsed command.
+pub fn run(command: Command) -> crate::Result<()> {
+    match command {
+        Command::Prior(c) => prior::run(c),
+        Command::Robot(c) => robot::run(c),
+        Command::Optimize(a) => optimize::run(a),
+        Command::Data(c) => data::run(c),
+        Command::Train(a) => train::run(a),
+        Command::Eval(a) => eval::run(a),
+        Command::Plan(a) => plan::run(a),
+        Command::Serve(a) => serve::run(a),
+        Command::Bench(a) => bench::run(a),
+    }
+}
+
+/// Write `value` as pretty JSON to stdout.
+pub fn print_json<T: serde::Serialize>(value: &T) -> crate::Result<()> {
+    let text = serde_json::to_string_pretty(value)
+        .map_err(|e| crate::Error::Numerical(format!("cannot serialise output: {e}")))?;
+    println!("{text}");
+    Ok(())
+}
+
+/// Read and parse a JSON file, naming the file (and the serde location) on error.
+pub fn read_json<T: serde::de::DeserializeOwned>(path: &std::path::Path) -> crate::Result<T> {
+    let text = std::fs::read_to_string(path).map_err(|e| crate::Error::file(path, e.to_string()))?;
+    serde_json::from_str(&text).map_err(|e| crate::Error::file(path, format!("malformed JSON: {e}")))
+}

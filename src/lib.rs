@@ -1,0 +1,57 @@
+//! # dPMP — Deep Probabilistic Motion Planning
+//!
+//! A camera image of a strawberry plant, with the target berry marked, goes
+//! through the dPMP network and becomes a Gaussian distribution over ProMP
+//! weights of a 7-joint Franka Panda trajectory. A sequence of convex QPs
+//! (Clarabel) then finds the weights closest to that Gaussian in Mahalanobis
+//! distance that keep every joint within its limits and every link clear of
+//! the berry-cluster geometry (parry3d).
+//!
+//! ```text
+//! image + target box ──► net::preprocess ──► net (AE | VAE | cVAE | Direct)
+//!                    ──► prior N(mu, Sigma) over 7 x n_basis ProMP weights   (promp)
+//! prior + scene + limits ──► optim::problem (whitened QP data)               (robot, scene)
+//!                    ──► optim::scp: linearise clearances, solve QP (Clarabel),
+//!                        accept / shrink trust region, until converged
+//!                    ──► optim::verify densely ──► trajectory + report
+//! ```
+//!
+//! Each arrow is a plain function over plain data; the HTTP layer
+//! ([`service`]), the CLI ([`cli`]) and the benchmark runner ([`bench`]) are
+//! thin shells over the same library calls.
+//!
+//! ## Modules, in data-flow order
+//!
+//! - [`promp`] — basis, fitting, weight distributions, conditioning, the
+//!   paper's covariance codec and annotation import.
+//! - [`robot`] — URDF loading, kinematics, Jacobians, inverse kinematics,
+//!   link collision shapes.
+//! - [`scene`] — obstacles and signed-distance queries against the robot.
+//! - [`optim`] — the Mahalanobis-closest trajectory optimiser.
+//! - [`synth`] — synthetic plant scenes, camera renderer, demonstrations.
+//! - [`net`] and [`train`] — the dPMP network in candle and its training.
+//! - [`service`] — the axum HTTP service.
+//! - [`bench`] — the offline benchmark runner.
+//! - [`plot`] — shared plotting helpers (plotters).
+//!
+//! ## Conventions
+//!
+//! Weights are joint-major: `w[j * n_basis + i]` is basis `i` of joint `j`.
+//! Angles in rad, lengths in m, time in s, quaternions `[x, y, z, w]`, all
+//! frames in the robot base frame. Trajectories are `T x n_joints` matrices
+//! (rows are time samples).
+
+pub mod bench;
+pub mod cli;
+pub mod error;
+pub mod net;
+pub mod optim;
+pub mod plot;
+pub mod promp;
+pub mod robot;
+pub mod scene;
+pub mod service;
+pub mod synth;
+pub mod train;
+
+pub use error::{Error, Result};

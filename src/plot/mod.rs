@@ -1,0 +1,1 @@
+//! Shared plotting helpers (plotters): per-joint trajectory bands and simple line charts.
