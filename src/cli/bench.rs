@@ -6,5 +6,8 @@ pub struct BenchArgs {}
 
 /// Run `dpmp bench`.
 pub fn run(_args: BenchArgs) -> crate::Result<()> {
-    Err(crate::Error::invalid("command", "`dpmp bench` is not available in this build yet"))
+    Err(crate::Error::invalid(
+        "command",
+        "`dpmp bench` is not available in this build yet",
+    ))
 }

@@ -6,5 +6,8 @@ pub struct EvalArgs {}
 
 /// Run `dpmp eval`.
 pub fn run(_args: EvalArgs) -> crate::Result<()> {
-    Err(crate::Error::invalid("command", "`dpmp eval` is not available in this build yet"))
+    Err(crate::Error::invalid(
+        "command",
+        "`dpmp eval` is not available in this build yet",
+    ))
 }

@@ -94,6 +94,20 @@ pub fn print_json<T: serde::Serialize>(value: &T) -> crate::Result<()> {
 
 /// Read and parse a JSON file, naming the file (and the serde location) on error.
 pub fn read_json<T: serde::de::DeserializeOwned>(path: &std::path::Path) -> crate::Result<T> {
-    let text = std::fs::read_to_string(path).map_err(|e| crate::Error::file(path, e.to_string()))?;
-    serde_json::from_str(&text).map_err(|e| crate::Error::file(path, format!("malformed JSON: {e}")))
+    let text =
+        std::fs::read_to_string(path).map_err(|e| crate::Error::file(path, e.to_string()))?;
+    serde_json::from_str(&text)
+        .map_err(|e| crate::Error::file(path, format!("malformed JSON: {e}")))
+}
+
+/// Rename the field of a validation error to the CLI flag that set it
+/// (`n_samples` -> `--n-samples`).
+pub fn as_flag_error(e: crate::Error) -> crate::Error {
+    match e {
+        crate::Error::Invalid { field, message } => crate::Error::Invalid {
+            field: format!("--{}", field.replace('_', "-")),
+            message,
+        },
+        other => other,
+    }
 }

@@ -6,5 +6,8 @@ pub struct OptimizeArgs {}
 
 /// Run `dpmp optimize`.
 pub fn run(_args: OptimizeArgs) -> crate::Result<()> {
-    Err(crate::Error::invalid("command", "`dpmp optimize` is not available in this build yet"))
+    Err(crate::Error::invalid(
+        "command",
+        "`dpmp optimize` is not available in this build yet",
+    ))
 }

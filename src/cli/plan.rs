@@ -6,5 +6,8 @@ pub struct PlanArgs {}
 
 /// Run `dpmp plan`.
 pub fn run(_args: PlanArgs) -> crate::Result<()> {
-    Err(crate::Error::invalid("command", "`dpmp plan` is not available in this build yet"))
+    Err(crate::Error::invalid(
+        "command",
+        "`dpmp plan` is not available in this build yet",
+    ))
 }

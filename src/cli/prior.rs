@@ -1,10 +1,246 @@
-//! `dpmp prior` (being built).
+//! `dpmp prior`: inspect, plot and create priors in the paper's annotation format.
+
+use crate::promp::{annotation, example, Basis, Prior, PrompConfig};
+use crate::{Error, Result};
+use clap::{Args, Subcommand, ValueEnum};
+use nalgebra::DMatrix;
+use serde::Serialize;
+use std::path::{Path, PathBuf};
 
 /// `dpmp prior` subcommands.
-#[derive(Debug, clap::Subcommand)]
-pub enum PriorCommand {}
+#[derive(Debug, Subcommand)]
+pub enum PriorCommand {
+    /// Print the mean and per-time standard deviation of an annotated prior.
+    Inspect(InspectArgs),
+    /// Plot per-joint mean trajectories with ±2σ bands.
+    Plot(PlotArgs),
+    /// Write an example prior (synthetic joint-space demonstrations shaped
+    /// like the paper's) in the annotation format.
+    Example(ExampleArgs),
+}
+
+/// Where a prior comes from.
+#[derive(Debug, Args)]
+pub struct Source {
+    /// Annotation folder with J1..J7/K.json.
+    #[arg(long)]
+    pub annotation: PathBuf,
+    /// Target index K.
+    #[arg(long, default_value_t = 0)]
+    pub index: usize,
+    /// Number of phase samples T.
+    #[arg(long, default_value_t = 150)]
+    pub n_samples: usize,
+    /// Basis width h.
+    #[arg(long, default_value_t = 0.07)]
+    pub width: f64,
+    /// Trajectory duration in seconds (time axis of plots).
+    #[arg(long, default_value_t = 4.0)]
+    pub duration: f64,
+}
+
+/// Output formats of `dpmp prior inspect`.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum OutputFormat {
+    /// Full JSON.
+    Json,
+    /// Short human-readable summary.
+    Table,
+}
+
+/// Arguments of `dpmp prior inspect`.
+#[derive(Debug, Args)]
+pub struct InspectArgs {
+    /// The prior to inspect.
+    #[command(flatten)]
+    pub source: Source,
+    /// Output format.
+    #[arg(long, value_enum, default_value_t = OutputFormat::Json)]
+    pub format: OutputFormat,
+}
+
+/// Arguments of `dpmp prior plot`.
+#[derive(Debug, Args)]
+pub struct PlotArgs {
+    /// The prior to plot.
+    #[command(flatten)]
+    pub source: Source,
+    /// Output image (.png or .svg).
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// Arguments of `dpmp prior example`.
+#[derive(Debug, Args)]
+pub struct ExampleArgs {
+    /// Output annotation folder (J1..J7 are created in it).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Target index K of the written files.
+    #[arg(long, default_value_t = 0)]
+    pub index: usize,
+    /// Number of demonstrations.
+    #[arg(long, default_value_t = 10)]
+    pub demos: usize,
+    /// Random seed.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+}
+
+/// The JSON printed by `dpmp prior inspect`.
+#[derive(Debug, Serialize)]
+pub struct InspectReport {
+    /// `T x 7` mean joint positions (rows = time).
+    pub mean: Vec<Vec<f64>>,
+    /// `T x 7` per-time standard deviations.
+    pub std: Vec<Vec<f64>>,
+    /// Smallest eigenvalue of the joint covariances before repair.
+    pub min_eigenvalue: f64,
+    /// Whether any covariance was repaired.
+    pub repaired: bool,
+    /// Repair notes.
+    pub warnings: Vec<String>,
+}
 
 /// Run a `dpmp prior` subcommand.
-pub fn run(command: PriorCommand) -> crate::Result<()> {
-    match command {}
+pub fn run(command: PriorCommand) -> Result<()> {
+    match command {
+        PriorCommand::Inspect(args) => inspect(&args),
+        PriorCommand::Plot(args) => plot(&args),
+        PriorCommand::Example(args) => write_example(&args),
+    }
+}
+
+fn load(source: &Source) -> Result<(Prior, Basis)> {
+    if !source.duration.is_finite() || source.duration <= 0.0 {
+        return Err(Error::invalid(
+            "--duration",
+            format!(
+                "must be a positive number of seconds, got {}",
+                source.duration
+            ),
+        ));
+    }
+    let flags = PrompConfig {
+        width: source.width,
+        n_samples: source.n_samples,
+        ..Default::default()
+    };
+    flags.validate().map_err(crate::cli::as_flag_error)?;
+    let prior = annotation::load_dir(&source.annotation, source.index)?;
+    let config = PrompConfig {
+        n_basis: prior.distribution.n_basis,
+        width: source.width,
+        n_samples: source.n_samples,
+    };
+    let basis = Basis::new(&config).map_err(crate::cli::as_flag_error)?;
+    Ok((prior, basis))
+}
+
+fn rows(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
+    (0..m.nrows())
+        .map(|r| m.row(r).iter().copied().collect())
+        .collect()
+}
+
+fn inspect(args: &InspectArgs) -> Result<()> {
+    let (prior, basis) = load(&args.source)?;
+    let mean = prior.distribution.trajectory_mean(&basis);
+    let std = prior.distribution.trajectory_std(&basis, 0.0);
+    match args.format {
+        OutputFormat::Json => crate::cli::print_json(&InspectReport {
+            mean: rows(&mean),
+            std: rows(&std),
+            min_eigenvalue: prior.min_eigenvalue,
+            repaired: prior.repaired,
+            warnings: prior.warnings,
+        }),
+        OutputFormat::Table => {
+            print!("{}", table(&args.source, &prior, &mean, &std));
+            Ok(())
+        }
+    }
+}
+
+/// Human summary: start/end mean and std per joint, repair status.
+fn table(source: &Source, prior: &Prior, mean: &DMatrix<f64>, std: &DMatrix<f64>) -> String {
+    let last = mean.nrows() - 1;
+    let mut out = format!(
+        "prior {} #{}: {} joints x {} basis, T = {}\n",
+        source.annotation.display(),
+        source.index,
+        prior.distribution.n_joints,
+        prior.distribution.n_basis,
+        mean.nrows()
+    );
+    out += "joint   start [rad]   final [rad]   final std   max std\n";
+    for j in 0..mean.ncols() {
+        let max_std = std.column(j).max();
+        out += &format!(
+            "J{:<5} {:>11.4} {:>13.4} {:>11.4} {:>9.4}\n",
+            j + 1,
+            mean[(0, j)],
+            mean[(last, j)],
+            std[(last, j)],
+            max_std
+        );
+    }
+    out += &format!(
+        "min eigenvalue {:.3e}; repaired: {}\n",
+        prior.min_eigenvalue,
+        if prior.repaired { "yes" } else { "no" }
+    );
+    for w in &prior.warnings {
+        out += &format!("warning: {w}\n");
+    }
+    out
+}
+
+fn plot(args: &PlotArgs) -> Result<()> {
+    crate::plot::format_of(&args.out, "--out")?;
+    let (prior, basis) = load(&args.source)?;
+    let times: Vec<f64> = basis
+        .phases()
+        .iter()
+        .map(|z| z * args.source.duration)
+        .collect();
+    let names: Vec<String> = (1..=prior.distribution.n_joints)
+        .map(|j| format!("joint {j}"))
+        .collect();
+    let series = crate::plot::JointSeries {
+        label: "prior mean ± 2σ".into(),
+        color: plotters::style::RGBColor(200, 30, 30),
+        mean: prior.distribution.trajectory_mean(&basis),
+        std: Some(prior.distribution.trajectory_std(&basis, 0.0)),
+        sigmas: 2.0,
+    };
+    let title = format!(
+        "ProMP prior {} #{}",
+        args.source.annotation.display(),
+        args.source.index
+    );
+    crate::plot::joint_panels(&args.out, &title, &times, &[series], &names, None)?;
+    eprintln!("wrote {}", args.out.display());
+    Ok(())
+}
+
+fn write_example(args: &ExampleArgs) -> Result<()> {
+    if args.demos < 2 {
+        return Err(Error::invalid(
+            "--demos",
+            format!("need at least 2 demonstrations, got {}", args.demos),
+        ));
+    }
+    let basis = Basis::new(&PrompConfig::default())?;
+    let dist = example::example_distribution(&basis, args.demos, args.seed)?;
+    let joints = annotation::joints_from_distribution(&dist)?;
+    annotation::write_dir(&args.out, args.index, &joints)?;
+    eprintln!(
+        "wrote {}",
+        Path::new(&args.out)
+            .join("J1..J7")
+            .join(format!("{}.json", args.index))
+            .display()
+    );
+    Ok(())
 }

@@ -6,5 +6,8 @@ pub struct ServeArgs {}
 
 /// Run `dpmp serve`.
 pub fn run(_args: ServeArgs) -> crate::Result<()> {
-    Err(crate::Error::invalid("command", "`dpmp serve` is not available in this build yet"))
+    Err(crate::Error::invalid(
+        "command",
+        "`dpmp serve` is not available in this build yet",
+    ))
 }

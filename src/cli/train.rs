@@ -6,5 +6,8 @@ pub struct TrainArgs {}
 
 /// Run `dpmp train`.
 pub fn run(_args: TrainArgs) -> crate::Result<()> {
-    Err(crate::Error::invalid("command", "`dpmp train` is not available in this build yet"))
+    Err(crate::Error::invalid(
+        "command",
+        "`dpmp train` is not available in this build yet",
+    ))
 }

@@ -1,1 +1,72 @@
-//! Shared plotting helpers (plotters): per-joint trajectory bands and simple line charts.
+//! Shared plotting helpers (plotters): per-joint trajectory panels with
+//! uncertainty bands (the paper's figures), used by `dpmp prior plot`,
+//! `dpmp optimize --plot` and the reports.
+//!
+//! Text is drawn with an embedded DejaVu Sans (see `DejaVuSans.LICENSE`), so
+//! plots need no system fonts. Output format follows the file extension
+//! (`.png` or `.svg`); files are written to a temporary name and renamed.
+
+mod joints;
+
+pub use joints::{joint_panels, JointSeries};
+
+use crate::{Error, Result};
+use std::path::{Path, PathBuf};
+use std::sync::Once;
+
+static FONT: Once = Once::new();
+
+/// Register the embedded font as plotters' `sans-serif` (idempotent).
+pub fn register_font() {
+    FONT.call_once(|| {
+        let bytes: &'static [u8] = include_bytes!("DejaVuSans.ttf");
+        // Registration only fails on a corrupt font, which is embedded and tested.
+        let _ =
+            plotters::style::register_font("sans-serif", plotters::style::FontStyle::Normal, bytes);
+    });
+}
+
+/// Image formats the plot helpers write.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Format {
+    /// Raster PNG.
+    Png,
+    /// Vector SVG.
+    Svg,
+}
+
+/// Format from a file extension; errors name `field`.
+pub fn format_of(path: &Path, field: &str) -> Result<Format> {
+    match path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(|e| e.to_ascii_lowercase())
+    {
+        Some(e) if e == "png" => Ok(Format::Png),
+        Some(e) if e == "svg" => Ok(Format::Svg),
+        _ => Err(Error::invalid(
+            field,
+            format!("{}: the file must end in .png or .svg", path.display()),
+        )),
+    }
+}
+
+/// Temporary sibling path with the same extension (plotters picks the
+/// encoder from it).
+pub(crate) fn temp_path(path: &Path) -> PathBuf {
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("png");
+    path.with_extension(format!("partial.{ext}"))
+}
+
+/// Rename the finished temporary file onto `path`, removing it on failure.
+pub(crate) fn finish(tmp: &Path, path: &Path) -> Result<()> {
+    std::fs::rename(tmp, path).map_err(|e| {
+        let _ = std::fs::remove_file(tmp);
+        Error::file(path, e.to_string())
+    })
+}
+
+/// Map any plotters error to a file error for `path`.
+pub(crate) fn plot_error<E: std::fmt::Display>(path: &Path) -> impl Fn(E) -> Error + '_ {
+    move |e| Error::file(path, format!("cannot draw plot: {e}"))
+}
