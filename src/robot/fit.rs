@@ -217,15 +217,16 @@ fn hill_climb(
 fn perturb(segment: &mut [[f64; 3]; 2], kind: usize, step: f64, rng: &mut SplitMix) {
     match kind {
         0 | 1 => {
-            for t in 0..3 {
-                segment[kind][t] += step * rng.gaussian();
+            for x in segment[kind].iter_mut() {
+                *x += step * rng.gaussian();
             }
         }
         2 => {
-            for t in 0..3 {
+            let [first, second] = segment;
+            for (x, y) in first.iter_mut().zip(second.iter_mut()) {
                 let delta = step * rng.gaussian();
-                segment[0][t] += delta;
-                segment[1][t] += delta;
+                *x += delta;
+                *y += delta;
             }
         }
         _ => {
