@@ -10,7 +10,9 @@ fn kinematics(c: &mut Criterion) {
     let q = PANDA_HOME;
     c.bench_function("fk_all_links", |b| b.iter(|| robot.fk(black_box(&q))));
     c.bench_function("tcp_pose", |b| b.iter(|| robot.tcp_pose(black_box(&q))));
-    c.bench_function("tcp_jacobian", |b| b.iter(|| robot.tcp_jacobian(black_box(&q))));
+    c.bench_function("tcp_jacobian", |b| {
+        b.iter(|| robot.tcp_jacobian(black_box(&q)))
+    });
     let frames = robot.fk(&q);
     let hand = robot.link_index("panda_hand").expect("hand link");
     let point = frames.poses[hand] * Point3::new(0.0, 0.03, 0.1);
