@@ -1,1 +1,35 @@
-//! (being built)
+//! The scene: obstacles around the robot and signed-distance queries
+//! between them and the robot's collision primitives.
+//!
+//! - [`obstacle`]: the serde types of the request schema and validation;
+//! - [`shape`]: obstacles and robot primitives as parry3d shapes;
+//! - [`broadphase`]: axis-aligned bounds and their gaps;
+//! - [`distance`]: one pair's signed distance, witness points and normal;
+//! - [`clearance`]: minimum clearance, pairs within an activation distance,
+//!   and the clearance gradient with respect to the joint angles;
+//! - [`compiled`]: the [`Scene`] itself.
+
+pub mod broadphase;
+pub mod clearance;
+pub mod compiled;
+pub mod distance;
+pub mod obstacle;
+pub mod shape;
+
+pub use clearance::Clearance;
+pub use compiled::Scene;
+pub use obstacle::{Obstacle, ObstacleShape, SceneFile};
+
+#[cfg(test)]
+mod tests {
+    fn assert_send_sync<T: Send + Sync>() {}
+
+    #[test]
+    fn robot_and_scene_can_be_shared_across_threads() {
+        assert_send_sync::<super::Scene>();
+        assert_send_sync::<crate::robot::Robot>();
+        let scene = super::Scene::empty();
+        let copy = std::thread::spawn(move || scene.is_empty()).join().unwrap();
+        assert!(copy);
+    }
+}
