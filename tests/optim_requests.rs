@@ -207,8 +207,8 @@ fn annotation_prior_with_an_indefinite_joint_is_repaired_and_solved() {
 
 #[test]
 fn same_request_gives_the_same_bytes_except_solve_ms() {
-    let (robot, mut req) = request(6, 6);
-    req.samples = 2;
+    let (robot, mut req) = request(6, 3);
+    req.samples = 1;
     let a = optimize(&req, &robot).unwrap();
     let b = optimize(&req, &robot).unwrap();
     assert_eq!(a.deterministic_json(), b.deterministic_json());

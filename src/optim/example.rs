@@ -8,7 +8,7 @@ use super::request::{Goal, OptimizeRequest, PriorSpec, SolverOptions};
 use crate::promp::example::example_distribution;
 use crate::promp::{Basis, PrompConfig, WeightDistribution};
 use crate::robot::Robot;
-use crate::scene::{Obstacle, ObstacleShape};
+use crate::scene::{Obstacle, ObstacleShape, Scene};
 use crate::Result;
 use nalgebra::{DMatrix, Vector3};
 use rand::{Rng, SeedableRng};
@@ -38,8 +38,8 @@ impl Default for ExampleSettings {
             n_obstacles: 10,
             n_demos: 12,
             clearance_m: 0.02,
-            goal_keep_out_m: 0.09,
-            offset_m: (0.0, 0.06),
+            goal_keep_out_m: 0.06,
+            offset_m: (0.02, 0.08),
             with_goal: true,
             with_start: true,
         }
@@ -71,11 +71,13 @@ pub fn typical_request(
     let tcp = tcp_path(robot, &mean);
     let goal = tcp[tcp.len() - 1] + random_unit(&mut rng) * rng.gen_range(0.0..0.005);
     let start_tcp = tcp[0];
+    let row = |t: usize| -> Vec<f64> { mean.row(t).iter().cloned().collect() };
+    let (q_start, q_final) = (row(0), row(mean.nrows() - 1));
     let mut obstacles = Vec::new();
     let mut attempts = 0;
     while obstacles.len() < settings.n_obstacles && attempts < 1000 {
         attempts += 1;
-        let k = rng.gen_range((tcp.len() * 3 / 10)..tcp.len());
+        let k = rng.gen_range((tcp.len() / 5)..(tcp.len() * 7 / 10));
         let centre = tcp[k]
             + random_unit(&mut rng) * rng.gen_range(settings.offset_m.0..settings.offset_m.1);
         let radius = rng.gen_range(0.01..0.02);
@@ -92,7 +94,7 @@ pub fn typical_request(
             continue;
         }
         let index = obstacles.len();
-        obstacles.push(if stem {
+        let candidate = if stem {
             Obstacle {
                 id: format!("stem-{index}"),
                 shape: ObstacleShape::Capsule {
@@ -109,7 +111,18 @@ pub fn typical_request(
                     radius,
                 },
             }
+        };
+        // The arm at the prior mean's start and final poses stays clear, so
+        // the cluster blocks the way, not the target.
+        let alone = Scene::new(vec![candidate.clone()])?;
+        let ends_clear = [&q_start, &q_final].iter().all(|q| {
+            alone
+                .min_clearance(robot, &robot.fk(q))
+                .is_none_or(|c| c.distance > settings.clearance_m)
         });
+        if ends_clear {
+            obstacles.push(candidate);
+        }
     }
     let start = settings.with_start.then(|| {
         (0..mean.ncols())

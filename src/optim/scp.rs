@@ -31,13 +31,15 @@ use std::time::Instant;
 /// short of the requirement.
 pub const CLEARANCE_BUFFER_M: f64 = 2e-4;
 /// Largest L1 penalty before slack is declared irreducible.
-pub const MAX_PENALTY: f64 = 1e9;
+pub const MAX_PENALTY: f64 = 1e6;
 /// Largest trust-region half-width.
 pub const MAX_TRUST_REGION: f64 = 1e3;
 /// Smallest trust-region half-width before the iteration counts as stalled.
-pub const MIN_TRUST_REGION: f64 = 1e-7;
+pub const MIN_TRUST_REGION: f64 = 1e-4;
 /// Linear rows count as satisfied within this (rad, rad/s).
 const LINEAR_TOLERANCE: f64 = 1e-7;
+/// Robot shapes linearised per obstacle and phase (the closest ones).
+const SHAPES_PER_OBSTACLE: usize = 2;
 /// Most phases added per dense verification round.
 const MAX_ADDED_PER_ROUND: usize = 64;
 
@@ -259,7 +261,18 @@ impl Problem {
                         &[warn],
                     ));
                 }
-                Err(e) => return Err(e.into_error()),
+                Err(QpFailure::Numerical(what)) => {
+                    let reason = format!("QP solver failed ({what}); best iterate returned");
+                    return Ok(self.finish(
+                        Status::MaxIterations,
+                        &eval,
+                        None,
+                        Some(reason),
+                        stats,
+                        started,
+                        &[],
+                    ));
+                }
             };
             stats.iterations += 1;
             stats.max_qp_rows = stats.max_qp_rows.max(sol.rows);
@@ -271,6 +284,21 @@ impl Problem {
             let actual = merit_here - trial.merit(rho);
             let scale = 1.0 + merit_here.abs();
             let accept = !eval.linear_ok || actual >= 0.1 * predicted.max(0.0) - 1e-12 * scale;
+            tracing::debug!(
+                iteration = stats.iterations,
+                rows = sol.rows,
+                merit = merit_here,
+                predicted,
+                actual,
+                step,
+                radius,
+                rho,
+                violation = eval.true_violation,
+                trial_violation = trial.true_violation,
+                linear_ok = eval.linear_ok,
+                accept,
+                "scp step"
+            );
             if accept {
                 let tiny = step <= 1e-6 * (1.0 + trial.z.amax()) || predicted <= 1e-9 * scale;
                 if eval.linear_ok && actual >= 0.75 * predicted && step >= 0.9 * radius {
@@ -333,9 +361,11 @@ impl Problem {
                 .filter_map(|p| {
                     let q = rows.position(p, &w);
                     let frames = self.robot.fk(&q);
-                    let list =
+                    let list = closest_per_obstacle(
                         self.scene
-                            .clearances_within(&self.robot, &frames, self.activation_m);
+                            .clearances_within(&self.robot, &frames, self.activation_m),
+                        SHAPES_PER_OBSTACLE,
+                    );
                     (!list.is_empty()).then_some(PhasePairs {
                         phase: p,
                         phase_value: rows.phases()[p],
@@ -544,6 +574,27 @@ impl Problem {
             stats,
         }
     }
+}
+
+/// Keep the `k` closest robot shapes per obstacle (order preserved).
+fn closest_per_obstacle(mut list: Vec<Clearance>, k: usize) -> Vec<Clearance> {
+    list.sort_by(|a, b| {
+        a.obstacle
+            .cmp(&b.obstacle)
+            .then(a.distance.total_cmp(&b.distance))
+    });
+    let mut out: Vec<Clearance> = Vec::with_capacity(list.len());
+    let mut run = 0;
+    for c in list {
+        run = match out.last() {
+            Some(prev) if prev.obstacle == c.obstacle => run + 1,
+            _ => 0,
+        };
+        if run < k {
+            out.push(c);
+        }
+    }
+    out
 }
 
 impl From<QpFailure> for Error {
