@@ -4,7 +4,8 @@
 //! peak RSS, then runs criterion on a few representative problems.
 //!
 //! `cargo bench --bench optim` (set `DPMP_BENCH_PROBLEMS` to change the
-//! number of problems, default 100).
+//! number of problems, default 100; `DPMP_BENCH_SWEEP_ONLY=1` skips the
+//! criterion part).
 
 use criterion::{black_box, Criterion};
 use dpmp::optim::example::{typical_request, ExampleSettings};
@@ -101,6 +102,9 @@ fn main() {
         .unwrap_or(100);
     let requests = problems(&robot, n);
     sweep(&robot, &requests);
+    if std::env::var_os("DPMP_BENCH_SWEEP_ONLY").is_some() {
+        return;
+    }
     let mut c = Criterion::default().sample_size(20).configure_from_args();
     let solvable: Vec<_> = requests.iter().take(3).collect();
     let validated: Vec<_> = solvable

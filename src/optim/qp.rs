@@ -185,8 +185,8 @@ impl Qp {
         let cone_slack = |k: usize| n_z + soft.len() + k;
 
         let mut q = vec![0.0; n];
-        for c in 0..n_z {
-            q[c] = -2.0 * self.center[c];
+        for (qc, cc) in q.iter_mut().zip(self.center.iter()) {
+            *qc = -2.0 * cc;
         }
         for (i, ineq) in self.inequalities.iter().enumerate() {
             if let (Some(s), Some(rho)) = (slack_of[i], ineq.penalty) {
