@@ -300,7 +300,9 @@ impl Problem {
                 "scp step"
             );
             if accept {
-                let tiny = step <= 1e-6 * (1.0 + trial.z.amax()) || predicted <= 1e-9 * scale;
+                let tiny = step <= 1e-6 * (1.0 + trial.z.amax())
+                    || predicted <= 1e-7 * scale
+                    || (trial.feasible() && actual.abs() <= 1e-6 * scale);
                 if eval.linear_ok && actual >= 0.75 * predicted && step >= 0.9 * radius {
                     radius = (radius * 2.0).min(MAX_TRUST_REGION);
                 }
