@@ -172,14 +172,20 @@ impl DemoContext<'_> {
         let options = IkOptions {
             null_space_bias: Some(bias),
             null_space_gain: self.settings.null_space_gain,
-            restarts: 0,
+            max_iterations: 600,
+            tolerance_m: s.ik_tolerance_m,
+            axis_tolerance_rad: s.ik_axis_tolerance_rad,
+            restarts: 3,
+            seed: rng.gen(),
             ..IkOptions::default()
         };
         let sol = self
             .robot
             .ik(&target, &start, &options)
             .map_err(|e| format!("IK failed: {e}"))?;
-        if !sol.converged {
+        if !(sol.position_error_m <= s.ik_tolerance_m
+            && sol.axis_error_rad <= s.ik_axis_tolerance_rad)
+        {
             return Err(format!(
                 "IK did not converge (position error {:.4} m)",
                 sol.position_error_m

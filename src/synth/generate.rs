@@ -141,8 +141,16 @@ impl Generator {
                 position: berry - axis.into_inner() * self.settings.demos.standoff_m,
                 approach_axis: Some(axis),
             };
-            let sol = self.robot.ik(&target, &home, &IkOptions::default())?;
-            if !sol.converged {
+            let d = &self.settings.demos;
+            let options = IkOptions {
+                tolerance_m: d.ik_tolerance_m,
+                axis_tolerance_rad: d.ik_axis_tolerance_rad,
+                ..IkOptions::default()
+            };
+            let sol = self.robot.ik(&target, &home, &options)?;
+            if !(sol.position_error_m <= d.ik_tolerance_m
+                && sol.axis_error_rad <= d.ik_axis_tolerance_rad)
+            {
                 return Err(Error::invalid(
                     "plant.region",
                     format!(

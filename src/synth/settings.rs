@@ -343,6 +343,10 @@ pub struct DemoSettings {
     pub axis_noise_rad: f64,
     /// Standard deviation per joint of the random null-space bias around home (rad).
     pub null_space_std_rad: Vec<f64>,
+    /// Pre-grasp position accuracy demanded of IK (m).
+    pub ik_tolerance_m: f64,
+    /// Pre-grasp approach-axis accuracy demanded of IK (rad).
+    pub ik_axis_tolerance_rad: f64,
     /// Gain of the IK's pull towards the null-space bias (per iteration, 0..1).
     pub null_space_gain: f64,
     /// Largest via-point deviation of the minimum-jerk profile (rad).
@@ -368,7 +372,9 @@ impl Default for DemoSettings {
             position_noise_m: 0.004,
             axis_noise_rad: 0.06,
             null_space_std_rad: vec![0.05, 0.05, 0.05, 0.10, 0.15, 0.20, 0.35],
-            null_space_gain: 0.1,
+            ik_tolerance_m: 0.002,
+            ik_axis_tolerance_rad: 0.02,
+            null_space_gain: 0.05,
             via_deviation_rad: 0.08,
             clearance_m: 0.005,
             check_stride: 3,
@@ -407,6 +413,8 @@ impl DemoSettings {
             ("axis_noise_rad", self.axis_noise_rad),
             ("via_deviation_rad", self.via_deviation_rad),
             ("clearance_m", self.clearance_m),
+            ("ik_tolerance_m", self.ik_tolerance_m),
+            ("ik_axis_tolerance_rad", self.ik_axis_tolerance_rad),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(Error::invalid(
