@@ -170,18 +170,20 @@ impl DemoContext<'_> {
             })
             .collect();
         let options = IkOptions {
-            null_space_bias: Some(bias),
+            null_space_bias: Some(bias.clone()),
             null_space_gain: self.settings.null_space_gain,
             max_iterations: 600,
-            tolerance_m: s.ik_tolerance_m,
-            axis_tolerance_rad: s.ik_axis_tolerance_rad,
-            restarts: 3,
+            // Iterate to a tight tolerance so the null-space pull acts;
+            // accept anything within the demo tolerance below.
+            tolerance_m: 1e-4,
+            axis_tolerance_rad: 1e-3,
+            restarts: 0,
             seed: rng.gen(),
             ..IkOptions::default()
         };
         let sol = self
             .robot
-            .ik(&target, &start, &options)
+            .ik(&target, &bias, &options)
             .map_err(|e| format!("IK failed: {e}"))?;
         if !(sol.position_error_m <= s.ik_tolerance_m
             && sol.axis_error_rad <= s.ik_axis_tolerance_rad)
