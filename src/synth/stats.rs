@@ -151,9 +151,12 @@ fn fmt_region(lo: &[f64; 3], hi: &[f64; 3]) -> String {
     )
 }
 
+/// One table row: how to format a statistic.
+type Row = Box<dyn Fn(&DatasetStats) -> String>;
+
 /// A side-by-side text table (`reference` optional).
 pub fn format_table(synthetic: &DatasetStats, reference: Option<&DatasetStats>) -> String {
-    let rows: Vec<(&str, Box<dyn Fn(&DatasetStats) -> String>)> = vec![
+    let rows: Vec<(&str, Row)> = vec![
         (
             "targets",
             Box::new(|s: &DatasetStats| s.targets.to_string()),

@@ -47,9 +47,9 @@ impl FloatImage {
         let normal = Normal::new(0.0f32, noise_std.max(0.0) as f32).ok();
         let mut img = RgbImage::new(self.width as u32, self.height as u32);
         for (p, c) in img.pixels_mut().zip(&self.pixels) {
-            for k in 0..3 {
+            for (out, v) in p.0.iter_mut().zip(c) {
                 let n = normal.map_or(0.0, |d| d.sample(rng));
-                p.0[k] = (c[k] * 255.0 + n).round().clamp(0.0, 255.0) as u8;
+                *out = (v * 255.0 + n).round().clamp(0.0, 255.0) as u8;
             }
         }
         img

@@ -37,7 +37,7 @@ impl PatchShape {
                 let theta = b.atan2(a);
                 let tooth = (theta * 15.0 / std::f64::consts::PI).rem_euclid(1.0);
                 let serration = 0.09 * tooth * (rho * 2.0).min(1.0);
-                rho < 1.0 - serration && !(a < -0.93)
+                rho < 1.0 - serration && a >= -0.93
             }
             PatchShape::Sepal => {
                 if !(-1.0..=1.0).contains(&a) {

@@ -278,7 +278,7 @@ mod tests {
         for i in 0..n {
             for j in 0..n {
                 let s = 0.02 * i as f64 / n as f64;
-                let phi = -3.14 + 6.28 * j as f64 / n as f64;
+                let phi = std::f64::consts::TAU * (j as f64 / n as f64 - 0.5);
                 if matches!(seed_at(s, phi, 0.014, 1), SeedHit::Seed) {
                     seeds += 1;
                 }
