@@ -10,7 +10,7 @@
 
 use super::broadphase::{geometry_bounds, Bounds};
 use super::distance::{pair_contact, PairContact};
-use super::shape::{CompiledObstacle, RobotPart};
+use super::shape::{CompiledObstacle, Core, RobotPart};
 use super::Scene;
 use crate::robot::{Frames, Robot};
 use nalgebra::{DVector, Point3};
@@ -45,6 +45,7 @@ pub(crate) struct PlacedShape {
     pub index: usize,
     pub part: RobotPart,
     pub bounds: Bounds,
+    pub core: Core,
 }
 
 /// Every robot primitive in the base frame for `frames`.
@@ -58,14 +59,23 @@ pub(crate) fn place_robot(robot: &Robot, frames: &Frames) -> Vec<PlacedShape> {
             PlacedShape {
                 index,
                 bounds: geometry_bounds(&world),
+                core: Core::of_geometry(&world),
                 part: RobotPart::new(&world),
             }
         })
         .collect()
 }
 
+/// Whether a lower bound `gap` rules out a distance below `limit`: when
+/// `gap >= limit` and the shapes do not touch (a penetration can be deeper
+/// than any negative limit only while the bounds overlap).
+#[inline]
+fn ruled_out(gap: f64, limit: f64) -> bool {
+    gap >= limit && gap > 0.0
+}
+
 /// Closest contact between a placed primitive and every part of an
-/// obstacle, below `prediction`.
+/// obstacle, below `prediction`; parts whose cores are too far are skipped.
 fn obstacle_contact(
     shape: &PlacedShape,
     obstacle: &CompiledObstacle,
@@ -74,6 +84,7 @@ fn obstacle_contact(
     obstacle
         .parts
         .iter()
+        .filter(|part| !ruled_out(shape.core.gap(&part.core), prediction))
         .filter_map(|part| pair_contact(&shape.part, part, prediction))
         .min_by(|a, b| a.distance.total_cmp(&b.distance))
 }
@@ -99,10 +110,15 @@ impl Scene {
         if self.is_empty() || !activation_m.is_finite() {
             return out;
         }
+        let Some(all) = self.bounds else {
+            return out;
+        };
         for shape in place_robot(robot, frames) {
+            if ruled_out(shape.bounds.gap(&all), activation_m) {
+                continue;
+            }
             for (k, obstacle) in self.compiled.iter().enumerate() {
-                let gap = shape.bounds.gap(&obstacle.bounds);
-                if gap >= activation_m && gap > 0.0 {
+                if ruled_out(shape.bounds.gap(&obstacle.bounds), activation_m) {
                     continue;
                 }
                 if let Some(contact) = obstacle_contact(&shape, obstacle, activation_m) {
@@ -166,10 +182,15 @@ impl Scene {
         let far = seed.2 + self.bounds_diameter() + 1.0;
         let first = obstacle_contact(&placed[seed.0], &self.compiled[seed.1], far)?;
         let mut best = (placed[seed.0].index, seed.1, first);
+        let all = self.bounds?;
         for (s, shape) in placed.iter().enumerate() {
+            if ruled_out(shape.bounds.gap(&all), best.2.distance) {
+                continue;
+            }
             for (k, obstacle) in self.compiled.iter().enumerate() {
-                let gap = shape.bounds.gap(&obstacle.bounds);
-                if (s, k) == (seed.0, seed.1) || (gap >= best.2.distance && gap > 0.0) {
+                if (s, k) == (seed.0, seed.1)
+                    || ruled_out(shape.bounds.gap(&obstacle.bounds), best.2.distance)
+                {
                     continue;
                 }
                 if let Some(contact) = obstacle_contact(shape, obstacle, best.2.distance) {

@@ -18,6 +18,8 @@ pub struct Part {
     pub shape: SharedShape,
     /// Local frame in the base frame.
     pub pose: Isometry3<f64>,
+    /// A capsule around the part (base frame), for the broad phase.
+    pub core: Core,
 }
 
 impl std::fmt::Debug for Part {
@@ -66,8 +68,9 @@ pub fn compile_obstacle(shape: &ObstacleShape) -> Option<CompiledObstacle> {
             let pose = Isometry3::from_parts(Translation3::from((a + b) * 0.5), rotation);
             let shape = SharedShape::new(Cylinder::new(0.5 * axis.norm() as f32, *radius as f32));
             // Bounds of a cylinder: the capsule bounds contain it.
+            let core = Core::new(a, b, *radius);
             Some(single(
-                Part { shape, pose },
+                Part { shape, pose, core },
                 Bounds::capsule(&a, &b, *radius),
             ))
         }
@@ -80,8 +83,9 @@ pub fn compile_obstacle(shape: &ObstacleShape) -> Option<CompiledObstacle> {
             let h = v(half_extents);
             let pose = Isometry3::from_parts(Translation3::from(v(center)), rotation);
             let shape = SharedShape::new(Cuboid::new(to_glam(&h)));
+            let core = Core::new(v(center), v(center), h.norm());
             Some(single(
-                Part { shape, pose },
+                Part { shape, pose, core },
                 Bounds::oriented_box(&v(center), &h, &rotation),
             ))
         }
@@ -93,10 +97,13 @@ pub fn compile_obstacle(shape: &ObstacleShape) -> Option<CompiledObstacle> {
             let hull = ConvexPolyhedron::from_convex_hull(&local)?;
             let pose =
                 Isometry3::from_parts(Translation3::from(centre), UnitQuaternion::identity());
+            let reach = pts.iter().map(|p| (p - centre).norm()).fold(0.0, f64::max);
+            let core = Core::new(centre, centre, reach);
             Some(single(
                 Part {
                     shape: SharedShape::new(hull),
                     pose,
+                    core,
                 },
                 Bounds::points(&pts),
             ))
@@ -143,6 +150,7 @@ fn ball_part(center: &Vector3<f64>, radius: f64) -> Part {
     Part {
         shape: SharedShape::new(Ball::new(radius as f32)),
         pose: Isometry3::translation(center.x, center.y, center.z),
+        core: Core::new(*center, *center, radius),
     }
 }
 
@@ -156,6 +164,55 @@ fn capsule_part(a: &Vector3<f64>, b: &Vector3<f64>, radius: f64) -> Part {
             radius as f32,
         )),
         pose: Isometry3::translation(mid.x, mid.y, mid.z),
+        core: Core::new(*a, *b, radius),
+    }
+}
+
+/// A capsule (segment `a`–`b` swept by `radius`) that contains a shape: the
+/// distance between two cores, less both radii, is a lower bound on the
+/// distance between the shapes (exact for balls and capsules).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Core {
+    /// First end of the segment.
+    pub a: Vector3<f64>,
+    /// Second end of the segment.
+    pub b: Vector3<f64>,
+    /// Radius around the segment.
+    pub radius: f64,
+}
+
+impl Core {
+    /// A core from its segment and radius.
+    pub fn new(a: Vector3<f64>, b: Vector3<f64>, radius: f64) -> Core {
+        Core { a, b, radius }
+    }
+
+    /// The core around a base-frame robot primitive.
+    pub fn of_geometry(geometry: &ShapeGeometry) -> Core {
+        match geometry {
+            ShapeGeometry::Capsule { a, b, radius } => {
+                Core::new(Vector3::from(*a), Vector3::from(*b), *radius)
+            }
+            ShapeGeometry::Sphere { center, radius } => {
+                Core::new(Vector3::from(*center), Vector3::from(*center), *radius)
+            }
+            ShapeGeometry::Box {
+                center,
+                half_extents,
+                ..
+            } => {
+                let c = Vector3::from(*center);
+                Core::new(c, c, Vector3::from(*half_extents).norm())
+            }
+        }
+    }
+
+    /// Lower bound on the distance between shapes inside `self` and `other`.
+    #[inline]
+    pub fn gap(&self, other: &Core) -> f64 {
+        super::broadphase::segment_distance(&self.a, &self.b, &other.a, &other.b)
+            - self.radius
+            - other.radius
     }
 }
 
