@@ -156,10 +156,13 @@ impl DemoContext<'_> {
     ) -> std::result::Result<Demonstration, String> {
         let s = self.settings;
         let start = self.sample_start(home, rng);
-        let goal_axis = perturb_axis(axis, s.axis_noise_rad, rng);
+        let goal_axis = perturb_axis(axis, s.axis_noise_rad, s.axis_pitch_noise_rad, rng);
         let noise = gaussian_vector(s.position_noise_m, rng);
         let target = IkTarget {
-            position: berry - goal_axis.into_inner() * s.standoff_m + noise,
+            position: berry
+                - goal_axis.into_inner()
+                    * (s.standoff_m + s.standoff_jitter_m * standard_normal(rng))
+                + noise,
             approach_axis: Some(goal_axis),
         };
         let bias: Vec<f64> = home
@@ -324,23 +327,25 @@ fn gaussian_vector(std: f64, rng: &mut impl Rng) -> Vector3<f64> {
     }
 }
 
-/// Tilt `axis` by a Gaussian angle of standard deviation `std_rad` in a random direction.
+/// Tilt `axis` by Gaussian angles: `yaw_std` sideways (about world up) and
+/// `pitch_std` in the vertical plane through the axis.
 pub fn perturb_axis(
     axis: &Unit<Vector3<f64>>,
-    std_rad: f64,
+    yaw_std: f64,
+    pitch_std: f64,
     rng: &mut impl Rng,
 ) -> Unit<Vector3<f64>> {
     let a = axis.into_inner();
-    let helper = if a.x.abs() < 0.9 {
-        Vector3::x()
+    let helper = if a.z.abs() < 0.9 {
+        Vector3::z()
     } else {
-        Vector3::y()
+        Vector3::x()
     };
     let e1 = a.cross(&helper).normalize();
     let e2 = a.cross(&e1);
     let (x, y) = (
-        std_rad * standard_normal(rng),
-        std_rad * standard_normal(rng),
+        yaw_std * standard_normal(rng),
+        pitch_std * standard_normal(rng),
     );
     Unit::new_normalize(a + e1 * x.tan() + e2 * y.tan())
 }
@@ -378,7 +383,7 @@ mod tests {
         let a = Unit::new_normalize(Vector3::new(0.97, -0.06, -0.22));
         let angles: Vec<f64> = (0..4000)
             .map(|_| {
-                perturb_axis(&a, 0.05, &mut rng)
+                perturb_axis(&a, 0.05, 0.05, &mut rng)
                     .dot(&a)
                     .clamp(-1.0, 1.0)
                     .acos()

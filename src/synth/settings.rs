@@ -339,8 +339,12 @@ pub struct DemoSettings {
     pub standoff_m: f64,
     /// Standard deviation of the pre-grasp position noise (m).
     pub position_noise_m: f64,
-    /// Standard deviation of the approach-axis noise (rad).
+    /// Standard deviation of the approach-axis noise sideways (yaw, rad).
     pub axis_noise_rad: f64,
+    /// Standard deviation of the approach-axis noise up/down (pitch, rad).
+    pub axis_pitch_noise_rad: f64,
+    /// Standard deviation of the stop distance along the approach (m).
+    pub standoff_jitter_m: f64,
     /// Standard deviation per joint of the random null-space bias around home (rad).
     pub null_space_std_rad: Vec<f64>,
     /// Pre-grasp position accuracy demanded of IK (m).
@@ -368,10 +372,12 @@ impl Default for DemoSettings {
             duration_s: 4.0,
             start_std_rad: 0.004,
             start_max_rad: 0.012,
-            standoff_m: 0.07,
-            position_noise_m: 0.012,
-            axis_noise_rad: 0.08,
-            null_space_std_rad: vec![0.005, 0.01, 0.005, 0.1, 0.05, 0.2, 0.4],
+            standoff_m: 0.085,
+            position_noise_m: 0.003,
+            axis_noise_rad: 0.01,
+            axis_pitch_noise_rad: 0.1,
+            standoff_jitter_m: 0.015,
+            null_space_std_rad: vec![0.005, 0.005, 0.005, 0.005, 0.005, 0.005, 0.4],
             ik_tolerance_m: 0.002,
             ik_axis_tolerance_rad: 0.02,
             null_space_gain: 0.3,
@@ -410,6 +416,8 @@ impl DemoSettings {
         for (name, v) in [
             ("start_std_rad", self.start_std_rad),
             ("position_noise_m", self.position_noise_m),
+            ("axis_pitch_noise_rad", self.axis_pitch_noise_rad),
+            ("standoff_jitter_m", self.standoff_jitter_m),
             ("axis_noise_rad", self.axis_noise_rad),
             ("via_deviation_rad", self.via_deviation_rad),
             ("clearance_m", self.clearance_m),
@@ -442,7 +450,9 @@ impl DemoSettings {
                 "must be >= 0",
             ));
         }
-        let needed = berry_extent(berry_radius_hi) + self.clearance_m + 3.0 * self.position_noise_m;
+        let needed = berry_extent(berry_radius_hi)
+            + self.clearance_m
+            + 3.0 * (self.position_noise_m + self.standoff_jitter_m);
         if !(self.standoff_m.is_finite() && self.standoff_m >= needed) {
             return Err(Error::invalid(
                 "demos.standoff_m",
