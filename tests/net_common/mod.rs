@@ -8,7 +8,6 @@ use dpmp::net::Arch;
 use dpmp::train::{ShapeSettings, TrainSettings};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use serde_json::json;
 use std::path::Path;
 
 pub const N_JOINTS: usize = 7;
@@ -32,8 +31,9 @@ pub fn random_spd(rng: &mut ChaCha8Rng, n: usize, scale: f64) -> Vec<Vec<f64>> {
 }
 
 /// Write a dataset with `configs` configurations of `berries` targets each
-/// into `dir`; configuration 0 goes to val, 1 to test (when there are more
-/// than two), the rest to train. Images are `width x height`.
+/// into `dir` with the synth engineer's types; configuration 0 goes to val,
+/// 1 to test (when there are more than two), the rest to train. Images are
+/// `width x height`.
 pub fn write_dataset(
     dir: &Path,
     configs: usize,
@@ -42,12 +42,20 @@ pub fn write_dataset(
     height: u32,
     seed: u64,
 ) {
+    use dpmp::synth::dataset::{
+        DistributionJson, Manifest, Pose, Splits, TargetEntry, TargetRecord, FORMAT,
+    };
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     std::fs::create_dir_all(dir.join("images")).unwrap();
     std::fs::create_dir_all(dir.join("targets")).unwrap();
     let dim = N_JOINTS * N_BASIS;
+    let promp = dpmp::promp::PrompConfig::default();
     let mut targets = Vec::new();
-    let (mut train, mut val, mut test) = (Vec::new(), Vec::new(), Vec::new());
+    let mut splits = Splits {
+        train: vec![],
+        val: vec![],
+        test: vec![],
+    };
     for c in 0..configs {
         let background = [
             rng.gen_range(0..200u8),
@@ -55,13 +63,13 @@ pub fn write_dataset(
             rng.gen_range(0..200u8),
         ];
         for b in 0..berries {
-            let id = format!("c{c:04}_b{b:02}");
+            let entry = TargetEntry::new(c, b);
             let x1 = rng.gen_range(0.0..(width as f64 * 0.7));
             let y1 = rng.gen_range(0.0..(height as f64 * 0.7));
             let bx = [x1, y1, x1 + width as f64 * 0.25, y1 + height as f64 * 0.25];
             let mut image = image::RgbImage::from_pixel(width, height, image::Rgb(background));
             dpmp::net::preprocess::paint_box(&mut image, bx, [255, 255, 255]);
-            image.save(dir.join(format!("images/{id}.png"))).unwrap();
+            image.save(dir.join(&entry.image)).unwrap();
             // Targets depend on the box position so that they are learnable.
             let u = (bx[0] + bx[2]) / (2.0 * width as f64);
             let v = (bx[1] + bx[3]) / (2.0 * height as f64);
@@ -78,30 +86,70 @@ pub fn write_dataset(
                     }
                 }
             }
-            let record = json!({
-                "id": id, "config": c, "berry": b, "image": format!("images/{id}.png"),
-                "box": bx, "center": [(bx[0] + bx[2]) / 2.0, (bx[1] + bx[3]) / 2.0],
-                "distribution": {"mean": mean, "cov": cov},
-                "promp": {"n_basis": N_BASIS, "width": 0.07, "n_samples": 150}
-            });
-            std::fs::write(dir.join(format!("targets/{id}.json")), record.to_string()).unwrap();
-            targets.push(json!({"id": id, "config": c, "berry": b,
-                "image": format!("images/{id}.png"), "record": format!("targets/{id}.json")}));
+            let distribution = dpmp::promp::WeightDistribution::new(
+                nalgebra::DVector::from_vec(mean.clone()),
+                nalgebra::DMatrix::from_fn(dim, dim, |r, k| cov[r][k]),
+                N_JOINTS,
+                N_BASIS,
+            )
+            .unwrap();
+            let record = TargetRecord {
+                id: entry.id.clone(),
+                config: c,
+                berry: b,
+                image: entry.image.clone(),
+                bbox: bx,
+                center: [(bx[0] + bx[2]) / 2.0, (bx[1] + bx[3]) / 2.0],
+                scene: dpmp::scene::SceneFile { obstacles: vec![] },
+                target_obstacle_id: format!("berry-{b}"),
+                target_position: [0.65, 0.0, 0.7],
+                start: vec![0.0; N_JOINTS],
+                final_tcp: Pose {
+                    position: [0.65, 0.0, 0.7],
+                    quaternion: [0.0, 0.0, 0.0, 1.0],
+                },
+                duration_s: 4.0,
+                promp: promp.clone(),
+                demos: vec![],
+                distribution: DistributionJson { mean, cov },
+                annotation: dpmp::promp::annotation::joints_from_distribution(&distribution)
+                    .unwrap(),
+            };
+            std::fs::write(
+                dir.join(&entry.record),
+                serde_json::to_string(&record).unwrap(),
+            )
+            .unwrap();
             match c {
-                0 => val.push(id),
-                1 if configs > 2 => test.push(id),
-                _ => train.push(id),
+                0 => splits.val.push(entry.id.clone()),
+                1 if configs > 2 => splits.test.push(entry.id.clone()),
+                _ => splits.train.push(entry.id.clone()),
             }
+            targets.push(entry);
         }
     }
-    let manifest = json!({
-        "format": "dpmp-dataset/1", "generator_version": "test", "seed": seed, "settings": {},
-        "promp": {"n_basis": N_BASIS, "width": 0.07, "n_samples": 150},
-        "camera": {"width": width, "height": height, "fx": 615.0, "fy": 615.0, "cx": 320.0, "cy": 240.0},
-        "splits": {"train": train, "val": val, "test": test},
-        "targets": targets
-    });
-    std::fs::write(dir.join("manifest.json"), manifest.to_string()).unwrap();
+    let manifest = Manifest {
+        format: FORMAT.to_string(),
+        generator_version: "test".into(),
+        seed,
+        settings: dpmp::synth::settings::SynthSettings::default(),
+        promp,
+        camera: dpmp::synth::camera::Intrinsics {
+            width,
+            height,
+            fx: 615.0,
+            fy: 615.0,
+            cx: 320.0,
+            cy: 240.0,
+        },
+        splits,
+        targets,
+    };
+    std::fs::write(
+        dir.join("manifest.json"),
+        serde_json::to_string(&manifest).unwrap(),
+    )
+    .unwrap();
 }
 
 /// Tiny, fast network settings.
