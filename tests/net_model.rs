@@ -116,7 +116,7 @@ fn eq7_and_eq8_match_nalgebra_reference() {
     let (mut ref7, mut ref8) = (0.0, 0.0);
     let mut ref_mean = vec![0.0; j];
     for bi in 0..b {
-        for ji in 0..j {
+        for (ji, joint_mean) in ref_mean.iter_mut().enumerate() {
             let k = bi * j + ji;
             let mu_hat =
                 DVector::from_iterator(n, pm[k * n..(k + 1) * n].iter().map(|&v| f64::from(v)));
@@ -132,7 +132,7 @@ fn eq7_and_eq8_match_nalgebra_reference() {
             let dc = phi * (&sigma_hat - &sigma) * phi.transpose();
             let m = dm.norm_squared() / t as f64;
             let cv = dc.norm_squared() / (t * t) as f64;
-            ref_mean[ji] += m / b as f64;
+            *joint_mean += m / b as f64;
             ref7 += (m + alpha * cv) / b as f64;
             let fm = last.dot(&(&mu_hat - &mu));
             let fv = (last.transpose() * (&sigma_hat - &sigma) * &last)[(0, 0)];
@@ -150,8 +150,9 @@ fn eq7_and_eq8_match_nalgebra_reference() {
         "eq8 {got8} vs {ref8}"
     );
     let per_joint = eq7.mean.to_vec1::<f32>().unwrap();
-    for ji in 0..j {
-        assert!((f64::from(per_joint[ji]) - ref_mean[ji]).abs() < 1e-4 * ref_mean[ji].max(1e-3));
+    assert_eq!(per_joint.len(), j);
+    for (got, want) in per_joint.iter().zip(&ref_mean) {
+        assert!((f64::from(*got) - want).abs() < 1e-4 * want.max(1e-3));
     }
 }
 

@@ -160,10 +160,10 @@ fn draw(
         y0 = y0.min(p[1]);
         y1 = y1.max(p[1]);
     }
-    if !(x1 > x0) {
+    if x1.partial_cmp(&x0) != Some(std::cmp::Ordering::Greater) {
         (x0, x1) = (x0 - 1.0, x0 + 1.0);
     }
-    if !(y1 > y0) {
+    if y1.partial_cmp(&y0) != Some(std::cmp::Ordering::Greater) {
         (y0, y1) = (y0 - 1.0, y0 + 1.0);
     }
     let (px, py) = (0.05 * (x1 - x0), 0.05 * (y1 - y0));
