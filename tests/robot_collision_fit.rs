@@ -8,7 +8,7 @@ use dpmp::robot::Robot;
 use std::path::PathBuf;
 
 /// Margin recorded in the URDF comment, less the rounding of its numbers.
-const RECORDED_MARGIN_M: f64 = 0.0029;
+const RECORDED_MARGIN_M: f64 = 0.003;
 
 fn mesh_dir() -> Option<PathBuf> {
     let manifest = PathBuf::from(env!("CARGO_MANIFEST_DIR"));

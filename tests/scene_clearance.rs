@@ -131,10 +131,11 @@ proptest! {
 #[test]
 fn penetration_is_negative_with_the_right_depth_and_normal() {
     let robot = panda();
-    let tcp = robot.tcp_pose(&PANDA_HOME).translation.vector;
-    let center = [tcp.x, tcp.y, tcp.z];
-    let scene = Scene::new(vec![sphere("inside", center, 0.02)]).unwrap();
     let frames = robot.fk(&PANDA_HOME);
+    let hand = frames.poses[robot.link_index("panda_hand").unwrap()];
+    let inside = hand * Point3::new(0.0, 0.0, 0.02);
+    let center = inside.coords.into();
+    let scene = Scene::new(vec![sphere("inside", center, 0.02)]).unwrap();
     let c = scene.min_clearance(&robot, &frames).unwrap();
     let (expect, _) = closed_form_sphere_clearance(&robot, &PANDA_HOME, &center, 0.02);
     assert!(
@@ -148,7 +149,12 @@ fn penetration_is_negative_with_the_right_depth_and_normal() {
     );
     let within = scene.clearances_within(&robot, &frames, 0.0);
     assert!(!within.is_empty() && within.iter().all(|c| c.distance < 0.0));
-    assert_eq!(scene.obstacle_containing(&Point3::from(tcp), 0.0), Some(0));
+    assert_eq!(scene.obstacle_containing(&inside, 0.0), Some(0));
+    // the normal points out of the obstacle towards the robot: pushing the
+    // ball along it (towards the robot) deepens the penetration
+    let pushed = Vector3::from(center) + Vector3::from(c.normal) * 0.005;
+    let (deeper, _) = closed_form_sphere_clearance(&robot, &PANDA_HOME, &pushed.into(), 0.02);
+    assert!(deeper < expect, "{deeper} vs {expect}");
 }
 
 #[test]
@@ -156,7 +162,7 @@ fn clearance_gradient_matches_finite_differences() {
     let robot = panda();
     let tcp = robot.tcp_pose(&PANDA_HOME);
     // berries ahead of the gripper, to the side of the forearm, and a box
-    let ahead = tcp * Point3::new(0.0, 0.0, 0.08);
+    let ahead = tcp * Point3::new(0.02, 0.03, 0.08);
     let side = robot.fk(&PANDA_HOME).poses[4] * Point3::new(0.0, 0.0, 0.2);
     let scenes = [
         vec![sphere("ahead", ahead.coords.into(), 0.015)],
@@ -273,7 +279,7 @@ fn berries_are_a_body_plus_a_stem() {
     };
     let on_stem = stem.signed_distance(&c.point_obstacle);
     assert!(
-        on_body.abs() < 1e-5 || on_stem.abs() < 1e-5,
+        on_body.abs() < 1e-4 || on_stem.abs() < 1e-4,
         "{on_body} {on_stem}"
     );
     assert!(c.distance > 0.0 && c.distance < 0.15);

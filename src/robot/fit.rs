@@ -198,17 +198,7 @@ fn hill_climb(
     for it in 0..iterations {
         let mut trial = segments.clone();
         let which = rng.below(trial.len());
-        let end = rng.below(3);
-        for t in 0..3 {
-            let delta = step * rng.gaussian();
-            // end 2 = move the whole segment
-            if end == 2 {
-                trial[which][0][t] += delta;
-                trial[which][1][t] += delta;
-            } else {
-                trial[which][end][t] += delta;
-            }
-        }
+        perturb(&mut trial[which], rng.below(4), step, rng);
         let v = fit_cost(&trial, &containing_radii(points, &trial));
         if v < volume {
             segments = trial;
@@ -219,6 +209,37 @@ fn hill_climb(
         }
     }
     (segments, volume)
+}
+
+/// One random move of a segment: `kind` 0 or 1 moves that end point, 2
+/// translates the whole segment, 3 stretches or shrinks it about its middle
+/// (needed to pass flat ends, where moving one end alone never helps).
+fn perturb(segment: &mut [[f64; 3]; 2], kind: usize, step: f64, rng: &mut SplitMix) {
+    match kind {
+        0 | 1 => {
+            for x in segment[kind].iter_mut() {
+                *x += step * rng.gaussian();
+            }
+        }
+        2 => {
+            let [first, second] = segment;
+            for (x, y) in first.iter_mut().zip(second.iter_mut()) {
+                let delta = step * rng.gaussian();
+                *x += delta;
+                *y += delta;
+            }
+        }
+        _ => {
+            let mid = [0, 1, 2].map(|t| 0.5 * (segment[0][t] + segment[1][t]));
+            let half = dist(&segment[0], &mid).max(1e-6);
+            let scale = 1.0 + step * rng.gaussian() / half;
+            for end in segment.iter_mut() {
+                for t in 0..3 {
+                    end[t] = mid[t] + (end[t] - mid[t]) * scale;
+                }
+            }
+        }
+    }
 }
 
 fn initial_segments(

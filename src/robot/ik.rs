@@ -194,48 +194,32 @@ impl Robot {
         bounds: &[(f64, f64)],
         options: &IkOptions,
     ) -> IkSolution {
-        let n = self.dof();
         let mut iterations = 0;
         loop {
             let (error, jacobian, position_error, axis_error) =
                 self.ik_residual(target, &q, options);
             let converged = position_error < options.tolerance_m
                 && (target.approach_axis.is_none() || axis_error < options.axis_tolerance_rad);
-            if converged || iterations >= options.max_iterations {
-                return IkSolution {
-                    q,
-                    position_error_m: position_error,
-                    axis_error_rad: axis_error,
-                    iterations,
-                    converged,
-                };
+            let finish = |q: Vec<f64>, iterations| IkSolution {
+                q,
+                position_error_m: position_error,
+                axis_error_rad: axis_error,
+                iterations,
+                converged,
+            };
+            let bias = options.null_space_bias.as_deref();
+            if (converged && bias.is_none()) || iterations >= options.max_iterations {
+                return finish(q, iterations);
+            }
+            // Only with zero damping at a singularity: keep what we have.
+            let Some((task, null)) = dls_step(&jacobian, &error, &q, bias, options) else {
+                return finish(q, iterations);
+            };
+            if converged && null.amax() < NULL_SPACE_SETTLED_RAD {
+                return finish(q, iterations);
             }
             iterations += 1;
-            let m = jacobian.nrows();
-            let damped = &jacobian * jacobian.transpose()
-                + DMatrix::identity(m, m) * options.damping.powi(2);
-            let Some(chol) = damped.cholesky() else {
-                // Only with zero damping at a singularity: keep the best so far.
-                return IkSolution {
-                    q,
-                    position_error_m: position_error,
-                    axis_error_rad: axis_error,
-                    iterations,
-                    converged: false,
-                };
-            };
-            let pseudo = jacobian.transpose() * chol.inverse();
-            let mut dq = &pseudo * &error;
-            if let Some(bias) = &options.null_space_bias {
-                let pull = DVector::from_iterator(
-                    n,
-                    bias.iter()
-                        .zip(&q)
-                        .map(|(b, x)| options.null_space_gain * (b - x)),
-                );
-                let projector = DMatrix::identity(n, n) - &pseudo * &jacobian;
-                dq += projector * pull;
-            }
+            let mut dq = task + null;
             let largest = dq.amax();
             if largest > options.max_step_rad {
                 dq *= options.max_step_rad / largest;
@@ -285,6 +269,40 @@ impl Robot {
             }
         }
     }
+}
+
+/// Once converged with a null-space bias, iterate until the null-space step
+/// falls below this (rad).
+const NULL_SPACE_SETTLED_RAD: f64 = 1e-4;
+
+/// The damped least-squares task step `Jᵀ (J Jᵀ + λ² I)⁻¹ e` and the
+/// null-space pull `(I - Jᵀ (J Jᵀ + λ² I)⁻¹ J) · gain · (bias - q)` (zero
+/// without a bias). `None` when `J Jᵀ + λ² I` is singular (λ = 0).
+fn dls_step(
+    jacobian: &DMatrix<f64>,
+    error: &DVector<f64>,
+    q: &[f64],
+    bias: Option<&[f64]>,
+    options: &IkOptions,
+) -> Option<(DVector<f64>, DVector<f64>)> {
+    let (m, n) = jacobian.shape();
+    let damped =
+        jacobian * jacobian.transpose() + DMatrix::identity(m, m) * options.damping.powi(2);
+    let pseudo = jacobian.transpose() * damped.cholesky()?.inverse();
+    let task = &pseudo * error;
+    let null = match bias {
+        None => DVector::zeros(n),
+        Some(bias) => {
+            let pull = DVector::from_iterator(
+                n,
+                bias.iter()
+                    .zip(q)
+                    .map(|(b, x)| options.null_space_gain * (b - x)),
+            );
+            (DMatrix::identity(n, n) - &pseudo * jacobian) * pull
+        }
+    };
+    Some((task, null))
 }
 
 /// Rotation vector turning `z` onto `desired` (perpendicular to both) and

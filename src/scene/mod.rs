@@ -19,3 +19,17 @@ pub mod shape;
 pub use clearance::Clearance;
 pub use compiled::Scene;
 pub use obstacle::{Obstacle, ObstacleShape, SceneFile};
+
+#[cfg(test)]
+mod tests {
+    fn assert_send_sync<T: Send + Sync>() {}
+
+    #[test]
+    fn robot_and_scene_can_be_shared_across_threads() {
+        assert_send_sync::<super::Scene>();
+        assert_send_sync::<crate::robot::Robot>();
+        let scene = super::Scene::empty();
+        let copy = std::thread::spawn(move || scene.is_empty()).join().unwrap();
+        assert!(copy);
+    }
+}

@@ -1,0 +1,51 @@
+//! Minimum clearance of the whole Panda against a 20-berry cluster, with
+//! its gradient (target: ≤ 20 µs per configuration on the 2-core dev box).
+
+use criterion::{black_box, criterion_group, criterion_main, Criterion};
+use dpmp::robot::{Robot, PANDA_HOME};
+use dpmp::scene::{Obstacle, ObstacleShape, Scene};
+use nalgebra::Point3;
+
+/// 20 berries with stems in a 12 x 10 x 16 cm cluster centred `ahead` m in
+/// front of the gripper at home, i.e. around the hand at the approach.
+fn berry_cluster(robot: &Robot, ahead: f64) -> Vec<Obstacle> {
+    let tcp = robot.tcp_pose(&PANDA_HOME);
+    (0..20)
+        .map(|i| {
+            let t = i as f64;
+            let local = Point3::new(
+                0.05 * (t * 1.3).sin(),
+                -0.06 + 0.006 * t,
+                ahead + 0.04 * (t * 0.7).cos(),
+            );
+            let c = tcp * local;
+            Obstacle {
+                id: format!("berry-{i}"),
+                shape: ObstacleShape::Berry {
+                    center: [c.x, c.y, c.z],
+                    radius: 0.012 + 0.001 * (i % 4) as f64,
+                    elongation: 0.004,
+                    stem_top: [c.x, c.y, c.z + 0.07],
+                    stem_radius: 0.002,
+                },
+            }
+        })
+        .collect()
+}
+
+fn clearance(c: &mut Criterion) {
+    let robot = Robot::panda().expect("the shipped Panda loads");
+    for (name, ahead) in [("near", 0.12), ("far", 0.5)] {
+        let scene = Scene::new(berry_cluster(&robot, ahead)).expect("valid cluster");
+        c.bench_function(&format!("min_clearance_gradient_20_berries_{name}"), |b| {
+            b.iter(|| scene.min_clearance_with_gradient(&robot, black_box(&PANDA_HOME)))
+        });
+        let frames = robot.fk(&PANDA_HOME);
+        c.bench_function(&format!("clearances_within_5cm_20_berries_{name}"), |b| {
+            b.iter(|| scene.clearances_within(&robot, black_box(&frames), 0.05))
+        });
+    }
+}
+
+criterion_group!(benches, clearance);
+criterion_main!(benches);

@@ -1,0 +1,32 @@
+//! Forward kinematics of every Panda link, the TCP Jacobian and IK
+//! (target: FK of all links ≤ 1 µs per configuration).
+
+use criterion::{black_box, criterion_group, criterion_main, Criterion};
+use dpmp::robot::{IkOptions, IkTarget, Robot, PANDA_HOME};
+use nalgebra::{Point3, Unit, Vector3};
+
+fn kinematics(c: &mut Criterion) {
+    let robot = Robot::panda().expect("the shipped Panda loads");
+    let q = PANDA_HOME;
+    c.bench_function("fk_all_links", |b| b.iter(|| robot.fk(black_box(&q))));
+    c.bench_function("tcp_pose", |b| b.iter(|| robot.tcp_pose(black_box(&q))));
+    c.bench_function("tcp_jacobian", |b| {
+        b.iter(|| robot.tcp_jacobian(black_box(&q)))
+    });
+    let frames = robot.fk(&q);
+    let hand = robot.link_index("panda_hand").expect("hand link");
+    let point = frames.poses[hand] * Point3::new(0.0, 0.03, 0.1);
+    c.bench_function("point_jacobian_hand", |b| {
+        b.iter(|| robot.point_jacobian(black_box(&q), &frames, hand, &point))
+    });
+    let target = IkTarget {
+        position: Point3::new(0.66, 0.05, 0.75),
+        approach_axis: Some(Unit::new_normalize(Vector3::new(1.0, 0.0, -0.2))),
+    };
+    c.bench_function("ik_berry_from_home", |b| {
+        b.iter(|| robot.ik(black_box(&target), &PANDA_HOME, &IkOptions::default()))
+    });
+}
+
+criterion_group!(benches, kinematics);
+criterion_main!(benches);

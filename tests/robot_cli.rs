@@ -1,0 +1,120 @@
+//! `dpmp robot fk | clearance | ik | shapes` through the real binary.
+
+use std::process::Command;
+
+const HOME: &str = "0.0348,-1.0102,-0.1525,-2.5334,-0.1583,2.8798,0.0543";
+
+fn dpmp(args: &[&str]) -> (i32, serde_json::Value, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_dpmp"))
+        .args(args)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout).to_string();
+    let json = serde_json::from_str(&stdout).unwrap_or(serde_json::Value::Null);
+    (
+        out.status.code().unwrap_or(-1),
+        json,
+        String::from_utf8_lossy(&out.stderr).to_string(),
+    )
+}
+
+#[test]
+fn fk_prints_every_link_frame() {
+    let (code, json, err) = dpmp(&["robot", "fk", "--q", HOME]);
+    assert_eq!(code, 0, "{err}");
+    let frames = json["frames"].as_object().unwrap();
+    assert_eq!(frames.len(), 11);
+    let tcp = &frames["panda_tcp"]["position"];
+    let expect = [0.380, -0.062, 0.708];
+    for i in 0..3 {
+        assert!(
+            (tcp[i].as_f64().unwrap() - expect[i]).abs() < 1.5e-3,
+            "{tcp}"
+        );
+    }
+    let q = frames["panda_link8"]["quaternion"].as_array().unwrap();
+    let norm: f64 = q.iter().map(|v| v.as_f64().unwrap().powi(2)).sum();
+    assert!((norm - 1.0).abs() < 1e-12);
+}
+
+#[test]
+fn clearance_reports_the_closest_obstacle() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("scene.json");
+    std::fs::write(
+        &scene,
+        r#"{"obstacles": [
+            {"id": "berry-1", "type": "sphere", "center": [0.5, -0.06, 0.68], "radius": 0.015},
+            {"id": "far", "type": "box", "center": [-1.0, 0.0, 0.0], "half_extents": [0.1, 0.1, 0.1]}
+        ]}"#,
+    )
+    .unwrap();
+    let path = scene.to_str().unwrap();
+    let (code, json, err) = dpmp(&[
+        "robot",
+        "clearance",
+        "--q",
+        HOME,
+        "--scene",
+        path,
+        "--activation",
+        "0.5",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(json["obstacle"], "berry-1");
+    let d = json["min_clearance_m"].as_f64().unwrap();
+    assert!(d > 0.0 && d < 0.2, "{d}");
+    assert_eq!(json["gradient"].as_array().unwrap().len(), 7);
+    assert!(json["within"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .all(|c| c["obstacle_id"] == "berry-1"));
+
+    std::fs::write(
+        &scene,
+        r#"{"obstacles": [{"id": "b", "type": "sphere", "center": [0, 0, 0], "radius": -1}]}"#,
+    )
+    .unwrap();
+    let (code, _, err) = dpmp(&["robot", "clearance", "--q", HOME, "--scene", path]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("obstacles[0].radius") && err.contains("\"b\""),
+        "{err}"
+    );
+}
+
+#[test]
+fn bad_flags_are_invalid_input() {
+    let (code, _, err) = dpmp(&["robot", "fk", "--q", "0,0,0"]);
+    assert_eq!(code, 2);
+    assert!(err.contains("--q"), "{err}");
+    let (code, _, err) = dpmp(&["robot", "fk", "--q", "0,0,x,0,0,0,0"]);
+    assert_eq!(code, 2);
+    assert!(err.contains("--q[2]"), "{err}");
+    let (code, _, err) = dpmp(&["robot", "ik", "--position", "0.6,0,0.7", "--axis", "0,0,0"]);
+    assert_eq!(code, 2);
+    assert!(err.contains("--axis"), "{err}");
+}
+
+#[test]
+fn ik_and_shapes_print_json() {
+    let (code, json, err) = dpmp(&[
+        "robot",
+        "ik",
+        "--position",
+        "0.66,0.05,0.75",
+        "--axis",
+        "1,0,-0.2",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(json["converged"], true);
+    assert!(json["position_error_m"].as_f64().unwrap() < 1e-3);
+    let (code, json, err) = dpmp(&["robot", "shapes"]);
+    assert_eq!(code, 0, "{err}");
+    let shapes = json["shapes"].as_array().unwrap();
+    assert!(shapes.len() >= 20);
+    assert!(shapes
+        .iter()
+        .any(|s| s["link_name"] == "panda_hand" && s["geometry"]["type"] == "box"));
+}
