@@ -1,12 +1,11 @@
 //! Image preprocessing, the ONE path used by training, evaluation and
 //! serving: validate the target box, paint it as a white filled rectangle
 //! unless the caller already masked the image, resize to the network's
-//! square input, normalise to `[-1, 1]` (CHW, f32), and compute the cVAE
+//! square input (area averaging, `image::imageops::thumbnail`), normalise to `[-1, 1]` (CHW, f32), and compute the cVAE
 //! condition (box centre divided by the image width and height; the paper's
 //! `/ [640, 480]` for the dataset's VGA images).
 
 use crate::{Error, Result};
-use image::imageops::FilterType;
 use image::{Rgb, RgbImage};
 use serde::{Deserialize, Serialize};
 
@@ -132,11 +131,11 @@ pub fn prepare(
     validate_box(target_box, width, height)?;
     let side = config.input_size as u32;
     let resized = if mask_applied {
-        image::imageops::resize(image, side, side, FilterType::Triangle)
+        image::imageops::thumbnail(image, side, side)
     } else {
         let mut painted = image.clone();
         paint_box(&mut painted, target_box, config.box_colour);
-        image::imageops::resize(&painted, side, side, FilterType::Triangle)
+        image::imageops::thumbnail(&painted, side, side)
     };
     Ok(Prepared {
         pixels: normalise(&resized, config),
