@@ -386,3 +386,23 @@ fn preprocessing_is_identical_in_training_and_inference_paths() {
         assert_eq!(repainted, sample.prepared);
     }
 }
+
+#[test]
+fn model_is_send_and_sync_and_shareable_across_threads() {
+    fn assert_send_sync<T: Send + Sync>() {}
+    assert_send_sync::<Model>();
+    let model = std::sync::Arc::new(Model::from_network(
+        Network::new(tiny_config(Arch::Vae), 3, &Device::Cpu).unwrap(),
+    ));
+    let image = test_images().remove(0);
+    let expected = predict_all(&model, std::slice::from_ref(&image));
+    let handles: Vec<_> = (0..2)
+        .map(|_| {
+            let (model, image) = (model.clone(), image.clone());
+            std::thread::spawn(move || predict_all(&model, &[image]))
+        })
+        .collect();
+    for h in handles {
+        assert_eq!(h.join().unwrap(), expected);
+    }
+}
