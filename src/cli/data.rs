@@ -1,10 +1,204 @@
-//! `dpmp data` (being built).
+//! `dpmp data`: generate a synthetic dataset, print its statistics, or
+//! render a preview of one plant configuration.
+
+use crate::promp::annotation::load_dir;
+use crate::robot::Robot;
+use crate::synth::dataset::{load_manifest, load_record, write_png_atomic};
+use crate::synth::generate::{check_output_dir, generate, GenerateOptions, Generator};
+use crate::synth::settings::SynthSettings;
+use crate::synth::stats::{
+    dataset_stats, default_basis, format_table, DatasetStats, TargetSummary,
+};
+use crate::{Error, Result};
+use std::path::{Path, PathBuf};
 
 /// `dpmp data` subcommands.
 #[derive(Debug, clap::Subcommand)]
-pub enum DataCommand {}
+pub enum DataCommand {
+    /// Generate a synthetic dataset (images, per-target records, manifest).
+    Generate(GenerateArgs),
+    /// Print a dataset's statistics, optionally beside the real annotation data.
+    Stats(StatsArgs),
+    /// Render the images of one configuration to PNG files (no dataset).
+    Preview(PreviewArgs),
+}
+
+/// Flags of `dpmp data generate`.
+#[derive(Debug, clap::Args)]
+pub struct GenerateArgs {
+    /// Output directory.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Plant configurations.
+    #[arg(long)]
+    pub configs: usize,
+    /// Berries (targets) per configuration.
+    #[arg(long)]
+    pub berries_per_config: usize,
+    /// Demonstrations per target.
+    #[arg(long, default_value_t = 10)]
+    pub demos: usize,
+    /// Seed (the output is identical for a seed, whatever the worker count).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub workers: Option<usize>,
+    /// JSON file overriding generator settings (any subset of the manifest's `settings`).
+    #[arg(long)]
+    pub settings: Option<PathBuf>,
+    /// Berry region `xmin,ymin,zmin,xmax,ymax,zmax` (m), instead of the real data's region.
+    #[arg(long, value_delimiter = ',', num_args = 6)]
+    pub region: Option<Vec<f64>>,
+    /// Replace an existing dataset in `--out`.
+    #[arg(long)]
+    pub overwrite: bool,
+    /// Hide the progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// Flags of `dpmp data stats`.
+#[derive(Debug, clap::Args)]
+pub struct StatsArgs {
+    /// Dataset directory.
+    pub dir: PathBuf,
+    /// Real annotation directory (J1..J7/K.json) to compare with.
+    #[arg(long)]
+    pub reference: Option<PathBuf>,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Flags of `dpmp data preview`.
+#[derive(Debug, clap::Args)]
+pub struct PreviewArgs {
+    /// Output directory for `c<config>_b<berry>.png`.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Berries in the configuration.
+    #[arg(long, default_value_t = 5)]
+    pub berries: usize,
+    /// Configuration index (selects the random stream).
+    #[arg(long, default_value_t = 0)]
+    pub config: usize,
+    /// Seed.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+}
 
 /// Run a `dpmp data` subcommand.
-pub fn run(command: DataCommand) -> crate::Result<()> {
-    match command {}
+pub fn run(command: DataCommand) -> Result<()> {
+    match command {
+        DataCommand::Generate(a) => run_generate(a),
+        DataCommand::Stats(a) => run_stats(a),
+        DataCommand::Preview(a) => run_preview(a),
+    }
+}
+
+/// Settings from the flags (and the optional settings file), validated.
+pub fn settings_from_args(a: &GenerateArgs) -> Result<SynthSettings> {
+    let mut s: SynthSettings = match &a.settings {
+        Some(path) => super::read_json(path)?,
+        None => SynthSettings::default(),
+    };
+    s.configs = a.configs;
+    s.berries_per_config = a.berries_per_config;
+    s.demos.demos = a.demos;
+    if let Some(r) = &a.region {
+        crate::error::ensure_len("region", r, 6)?;
+        s.plant.region.min = [r[0], r[1], r[2]];
+        s.plant.region.max = [r[3], r[4], r[5]];
+    }
+    s.validate()?;
+    Ok(s)
+}
+
+fn run_generate(a: GenerateArgs) -> Result<()> {
+    let settings = settings_from_args(&a)?;
+    if a.workers == Some(0) {
+        return Err(Error::invalid("workers", "must be >= 1"));
+    }
+    check_output_dir(&a.out, a.overwrite)?;
+    let generator = Generator::new(settings, Robot::panda()?)?;
+    let summary = generate(
+        &generator,
+        &GenerateOptions {
+            out: a.out.clone(),
+            seed: a.seed,
+            workers: a.workers,
+            progress: !a.quiet,
+            overwrite: a.overwrite,
+        },
+    )?;
+    super::print_json(&summary)
+}
+
+/// Statistics of every target in a dataset directory.
+pub fn stats_of_dataset(dir: &Path, robot: &Robot) -> Result<DatasetStats> {
+    let manifest = load_manifest(dir)?;
+    let summaries = manifest
+        .targets
+        .iter()
+        .map(|e| load_record(dir, e).and_then(|r| TargetSummary::from_record(&r)))
+        .collect::<Result<Vec<_>>>()?;
+    Ok(dataset_stats(&summaries, &default_basis()?, &robot.home()))
+}
+
+/// Statistics of the real annotation data (`K.json` files, configuration `K / 5`).
+pub fn stats_of_annotations(dir: &Path, robot: &Robot) -> Result<DatasetStats> {
+    let basis = default_basis()?;
+    let mut summaries = Vec::new();
+    while dir
+        .join("J1")
+        .join(format!("{}.json", summaries.len()))
+        .exists()
+    {
+        let k = summaries.len();
+        let prior = load_dir(dir, k)?;
+        summaries.push(TargetSummary::from_prior(
+            k / 5,
+            prior.distribution,
+            robot,
+            &basis,
+        ));
+    }
+    if summaries.is_empty() {
+        return Err(Error::file(
+            dir,
+            "no annotation files J1/0.json, J1/1.json, ... found",
+        ));
+    }
+    Ok(dataset_stats(&summaries, &basis, &robot.home()))
+}
+
+fn run_stats(a: StatsArgs) -> Result<()> {
+    let robot = Robot::panda()?;
+    let synthetic = stats_of_dataset(&a.dir, &robot)?;
+    let reference = a
+        .reference
+        .as_deref()
+        .map(|d| stats_of_annotations(d, &robot))
+        .transpose()?;
+    if a.json {
+        return super::print_json(
+            &serde_json::json!({ "synthetic": synthetic, "reference": reference }),
+        );
+    }
+    print!("{}", format_table(&synthetic, reference.as_ref()));
+    Ok(())
+}
+
+fn run_preview(a: PreviewArgs) -> Result<()> {
+    let settings = SynthSettings::new(1, a.berries);
+    let generator = Generator::new(settings, Robot::panda()?)?;
+    let output = generator.config(a.seed, a.config)?;
+    std::fs::create_dir_all(&a.out).map_err(|e| Error::file(&a.out, e.to_string()))?;
+    for (record, image) in output.records.iter().zip(&output.images) {
+        let path = a.out.join(format!("{}.png", record.id));
+        write_png_atomic(&path, image)?;
+        println!("{}", path.display());
+    }
+    Ok(())
 }

@@ -1,13 +1,66 @@
-//! `dpmp eval` (being built).
+//! `dpmp eval`: the paper's tables for a trained model on a dataset split.
+
+use crate::net::Model;
+use crate::train::data::load_split;
+use crate::train::eval::{evaluate, to_markdown, write_outputs};
+use crate::Error;
+use std::path::PathBuf;
 
 /// Arguments of `dpmp eval`.
 #[derive(Debug, clap::Args)]
-pub struct EvalArgs {}
+pub struct EvalArgs {
+    /// Model directory (model.safetensors + config.json).
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Dataset directory (with manifest.json).
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Split: train, val, test or all.
+    #[arg(long, default_value = "test")]
+    pub split: String,
+    /// Output: table (Markdown) or json.
+    #[arg(long, default_value = "table")]
+    pub format: String,
+    /// Directory for eval.json, eval.md and embedding.png (default: the
+    /// model directory's `eval-<split>`).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Covariance weight alpha of the Eq. 7 column (default: the model's).
+    #[arg(long)]
+    pub alpha: Option<f64>,
+}
 
 /// Run `dpmp eval`.
-pub fn run(_args: EvalArgs) -> crate::Result<()> {
-    Err(crate::Error::invalid(
-        "command",
-        "`dpmp eval` is not available in this build yet",
-    ))
+pub fn run(args: EvalArgs) -> crate::Result<()> {
+    if !matches!(args.split.as_str(), "train" | "val" | "test" | "all") {
+        return Err(Error::invalid("split", "expected train, val, test or all"));
+    }
+    if !matches!(args.format.as_str(), "table" | "json") {
+        return Err(Error::invalid("format", "expected table or json"));
+    }
+    let model = Model::load(&args.model)?;
+    let alpha = match args.alpha {
+        Some(a) if a.is_finite() && a >= 0.0 => a,
+        Some(a) => {
+            return Err(Error::invalid(
+                "alpha",
+                format!("must be finite and >= 0, got {a}"),
+            ))
+        }
+        None => model.config().training.as_ref().map_or(1.0, |t| t.alpha),
+    };
+    let data = load_split(&args.data, &args.split, &model.config().preprocess)?;
+    let robot = crate::robot::Robot::panda()?;
+    let fk = |q: &[f64]| robot.tcp_pose(q);
+    let (report, embedding) = evaluate(&model, &data.samples, &args.split, alpha, &fk)?;
+    let out = args
+        .out
+        .unwrap_or_else(|| args.model.join(format!("eval-{}", args.split)));
+    write_outputs(&out, &report, &embedding)?;
+    if args.format == "json" {
+        crate::cli::print_json(&report)
+    } else {
+        println!("{}", to_markdown(&report));
+        Ok(())
+    }
 }

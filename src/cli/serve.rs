@@ -8,11 +8,13 @@
 //! ```
 //! The token may also come from `DPMP_API_TOKEN`; it is never logged.
 
+use crate::net::Model;
+use crate::robot::Robot;
 use crate::service::auth::{Token, TOKEN_ENV};
 use crate::service::{AppState, ServiceConfig};
 use crate::{Error, Result};
 use std::net::SocketAddr;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 /// Arguments of `dpmp serve`.
@@ -65,14 +67,58 @@ pub struct ServeArgs {
     /// Log as JSON lines instead of text.
     #[arg(long)]
     pub log_json: bool,
+    /// Print the typical /v1/optimize request for this seed (the load
+    /// benchmark's body: real-like prior, 10 obstacles, 150 samples, 2 cm
+    /// clearance) and exit without serving.
+    #[arg(long, value_name = "SEED")]
+    pub print_typical_request: Option<u64>,
 }
+
+/// Model directory tried when `--model` is not given.
+pub const DEFAULT_MODEL_DIR: &str = "models/default";
 
 /// Run `dpmp serve`.
 pub fn run(args: ServeArgs) -> Result<()> {
     init_logging(args.log_json);
+    let robot = load_robot(&args)?;
+    if let Some(seed) = args.print_typical_request {
+        let settings = crate::optim::example::ExampleSettings::default();
+        let request = crate::optim::example::typical_request(&robot, seed, &settings)?;
+        return crate::cli::print_json(&request);
+    }
     let config = config_from_args(&args)?;
-    let state = AppState::new(config)?;
+    let model = load_model(args.model.as_deref())?;
+    let state = AppState::new(config, robot, model)?;
     crate::service::serve(state)
+}
+
+/// The shipped Panda, or `--robot` with `--base-link`/`--tip-link`.
+fn load_robot(args: &ServeArgs) -> Result<Robot> {
+    match &args.robot {
+        None => Robot::panda(),
+        Some(path) => Robot::from_urdf_file(path, &args.base_link, &args.tip_link),
+    }
+}
+
+/// `--model DIR` must load; without the flag `models/default` is loaded
+/// when present, else the service runs without a model (with a warning).
+fn load_model(dir: Option<&Path>) -> Result<Option<Model>> {
+    let dir = match dir {
+        Some(dir) => dir,
+        None if Path::new(DEFAULT_MODEL_DIR).join("config.json").exists() => {
+            Path::new(DEFAULT_MODEL_DIR)
+        }
+        None => {
+            tracing::warn!(
+                "no model at {DEFAULT_MODEL_DIR}: /v1/plan will answer 503 model_unavailable \
+                 (train one, see the README, or pass --model DIR); /v1/optimize works"
+            );
+            return Ok(None);
+        }
+    };
+    let model = Model::load(dir)?;
+    tracing::info!(model = model.name(), dir = %dir.display(), "model loaded");
+    Ok(Some(model))
 }
 
 /// Build the [`ServiceConfig`] from the flags and the environment.

@@ -1,13 +1,86 @@
-//! `dpmp train` (being built).
+//! `dpmp train`: train a dPMP network on a generated dataset.
+
+use crate::net::Arch;
+use crate::train::{train, TrainSettings};
+use std::path::PathBuf;
 
 /// Arguments of `dpmp train`.
 #[derive(Debug, clap::Args)]
-pub struct TrainArgs {}
+pub struct TrainArgs {
+    /// Dataset directory (with manifest.json).
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Architecture: ae, vae, cvae or direct.
+    #[arg(long)]
+    pub arch: String,
+    /// Run tp3 (domain-specific latent tuning) after tp2.
+    #[arg(long)]
+    pub latent_tuning: bool,
+    /// Output model directory (e.g. models/NAME).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Seed of initialisation, shuffling and noise.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Maximum epochs of tp1 (reconstruction).
+    #[arg(long)]
+    pub epochs_tp1: Option<usize>,
+    /// Maximum epochs of tp2 (heads; also the Direct model's only phase).
+    #[arg(long)]
+    pub epochs_tp2: Option<usize>,
+    /// Maximum epochs of tp3 (latent tuning).
+    #[arg(long)]
+    pub epochs_tp3: Option<usize>,
+    /// Mini-batch size (the authors: 5).
+    #[arg(long)]
+    pub batch: Option<usize>,
+    /// Peak learning rate (the authors: 1e-4), cosine-decayed per phase.
+    #[arg(long)]
+    pub lr: Option<f64>,
+    /// Covariance weight alpha of Eq. 7 / Eq. 8.
+    #[arg(long)]
+    pub alpha: Option<f64>,
+    /// KL weight of tp1 for VAE / cVAE.
+    #[arg(long)]
+    pub kl_weight: Option<f64>,
+    /// Epochs without validation improvement before a phase stops.
+    #[arg(long)]
+    pub patience: Option<usize>,
+    /// Latent size.
+    #[arg(long)]
+    pub latent_dim: Option<usize>,
+    /// Continue an interrupted run from OUT/train_state.
+    #[arg(long)]
+    pub resume: bool,
+    /// Hide progress bars.
+    #[arg(long)]
+    pub quiet: bool,
+}
 
-/// Run `dpmp train`.
-pub fn run(_args: TrainArgs) -> crate::Result<()> {
-    Err(crate::Error::invalid(
-        "command",
-        "`dpmp train` is not available in this build yet",
-    ))
+impl TrainArgs {
+    /// The training settings these flags describe.
+    pub fn settings(&self) -> crate::Result<TrainSettings> {
+        let mut s = TrainSettings::new(&self.data, &self.out, Arch::parse(&self.arch)?);
+        s.latent_tuning = self.latent_tuning;
+        s.seed = self.seed;
+        s.epochs_tp1 = self.epochs_tp1.unwrap_or(s.epochs_tp1);
+        s.epochs_tp2 = self.epochs_tp2.unwrap_or(s.epochs_tp2);
+        s.epochs_tp3 = self.epochs_tp3.unwrap_or(s.epochs_tp3);
+        s.batch = self.batch.unwrap_or(s.batch);
+        s.lr = self.lr.unwrap_or(s.lr);
+        s.alpha = self.alpha.unwrap_or(s.alpha);
+        s.kl_weight = self.kl_weight.unwrap_or(s.kl_weight);
+        s.patience = self.patience.unwrap_or(s.patience);
+        s.shape.latent_dim = self.latent_dim.unwrap_or(s.shape.latent_dim);
+        s.resume = self.resume;
+        s.progress = !self.quiet;
+        s.validate()?;
+        Ok(s)
+    }
+}
+
+/// Run `dpmp train`; prints the training record as JSON.
+pub fn run(args: TrainArgs) -> crate::Result<()> {
+    let outcome = train(&args.settings()?)?;
+    crate::cli::print_json(&outcome)
 }

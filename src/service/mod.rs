@@ -20,7 +20,8 @@
 //! # fn main() -> dpmp::Result<()> {
 //! use dpmp::service::{AppState, RunningServer, ServiceConfig};
 //! let config = ServiceConfig::default().with_addr("127.0.0.1:0".parse().unwrap());
-//! let server = RunningServer::start(AppState::new(config)?)?;
+//! let robot = dpmp::robot::Robot::panda()?;
+//! let server = RunningServer::start(AppState::new(config, robot, None)?)?;
 //! println!("listening on {}", server.addr());
 //! server.shutdown()?;
 //! # Ok(()) }

@@ -17,7 +17,8 @@ pub fn test_config() -> ServiceConfig {
 
 /// Start a server with `config` (and the shipped robot, no model).
 pub fn start(config: ServiceConfig) -> RunningServer {
-    RunningServer::start(AppState::new(config).unwrap()).unwrap()
+    let robot = dpmp::robot::Robot::panda().unwrap();
+    RunningServer::start(AppState::new(config, robot, None).unwrap()).unwrap()
 }
 
 /// A blocking client with a generous timeout (tests must not hang).

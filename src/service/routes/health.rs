@@ -31,11 +31,37 @@ pub struct Readiness {
     pub ready: bool,
     /// Whether a graceful shutdown has begun.
     pub shutting_down: bool,
+    /// The robot (always loaded: the service does not start without it).
+    pub robot: RobotStatus,
+    /// The network model (optional; `/v1/plan` needs it).
+    pub model: ModelStatus,
+}
+
+/// Robot part of `/readyz`.
+#[derive(Debug, Serialize)]
+pub struct RobotStatus {
+    /// Always true.
+    pub loaded: bool,
+    /// Robot name.
+    pub name: String,
+    /// Number of actuated joints.
+    pub dof: usize,
+}
+
+/// Model part of `/readyz`.
+#[derive(Debug, Serialize)]
+pub struct ModelStatus {
+    /// Whether a model is loaded.
+    pub loaded: bool,
+    /// Its name.
+    pub name: Option<String>,
 }
 
 /// `GET /readyz`: 200 when ready, 503 with the same body otherwise.
 pub async fn readyz(State(state): State<AppState>) -> (StatusCode, Json<Readiness>) {
     let shutting_down = state.is_shutting_down();
+    let robot = state.robot();
+    let model = state.model();
     let ready = !shutting_down;
     let status = if ready {
         StatusCode::OK
@@ -47,6 +73,15 @@ pub async fn readyz(State(state): State<AppState>) -> (StatusCode, Json<Readines
         Json(Readiness {
             ready,
             shutting_down,
+            robot: RobotStatus {
+                loaded: true,
+                name: robot.name().to_string(),
+                dof: robot.dof(),
+            },
+            model: ModelStatus {
+                loaded: model.is_some(),
+                name: model.map(|m| m.name().to_string()),
+            },
         }),
     )
 }

@@ -4,10 +4,14 @@
 
 use super::state::AppState;
 use axum::http::Method;
-use axum::routing::{get, MethodRouter};
+use axum::routing::{get, post, MethodRouter};
 
 pub mod health;
 pub mod metrics;
+pub mod models;
+pub mod optimize;
+pub mod plan;
+pub mod robot;
 
 /// One route: method, path template, and whether the bearer token (when
 /// configured) is required.
@@ -33,6 +37,13 @@ fn spec(method: Method, path: &'static str, protected: bool) -> RouteSpec {
 /// orchestrator probes; everything else is protected.
 pub fn table() -> Vec<(RouteSpec, MethodRouter<AppState>)> {
     vec![
+        (
+            spec(Method::POST, "/v1/optimize", true),
+            post(optimize::optimize),
+        ),
+        (spec(Method::POST, "/v1/plan", true), post(plan::plan)),
+        (spec(Method::GET, "/v1/robot", true), get(robot::robot)),
+        (spec(Method::GET, "/v1/models", true), get(models::models)),
         (spec(Method::GET, "/healthz", false), get(health::healthz)),
         (spec(Method::GET, "/readyz", false), get(health::readyz)),
         (spec(Method::GET, "/metrics", true), get(metrics::metrics)),

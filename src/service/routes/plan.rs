@@ -15,7 +15,7 @@
 
 use super::optimize::{check_request_limits, record_solve, solve_control};
 use crate::net::Model;
-use crate::optim::{optimize_with, OptimizeRequest, OptimizeResponse, PriorSpec};
+use crate::optim::{optimize_with, OptimizeRequest, OptimizeResponse};
 use crate::promp::{Basis, WeightDistribution};
 use crate::robot::Robot;
 use crate::service::error::ApiError;
@@ -125,20 +125,13 @@ fn predict_and_optimize(
         ));
     }
     let prior = prior_trajectory(&distribution, &basis);
-    request.prior = prior_spec(&distribution);
+    request.prior = crate::optim::example::prior_spec(&distribution);
     let result = optimize_with(&request, robot, ctl)?;
     Ok(PlanResponse {
         result,
         prior,
         model: model.name().to_string(),
     })
-}
-
-fn prior_spec(d: &WeightDistribution) -> PriorSpec {
-    PriorSpec::Full {
-        mean: d.mean.iter().copied().collect(),
-        cov: rows(&d.cov),
-    }
 }
 
 fn prior_trajectory(d: &WeightDistribution, basis: &Basis) -> PriorTrajectory {
@@ -192,7 +185,9 @@ async fn parse_multipart_request(
             "image" if image.is_none() => image = Some(bytes.to_vec()),
             "request" if fields.is_none() => fields = Some(parse_json(&bytes)?),
             "image" | "request" => {
-                return Err(malformed_multipart(&format!("the part `{name}` appears twice")))
+                return Err(malformed_multipart(&format!(
+                    "the part `{name}` appears twice"
+                )))
             }
             other => {
                 return Err(malformed_multipart(&format!(
@@ -265,10 +260,13 @@ fn finish_input(
 
 fn parse_box(value: Option<Value>) -> Result<[f64; 4], ApiError> {
     let value = value.ok_or_else(|| {
-        ApiError::invalid(BOX_FIELD, "missing: the target box [x1, y1, x2, y2] in pixels")
+        ApiError::invalid(
+            BOX_FIELD,
+            "missing: the target box [x1, y1, x2, y2] in pixels",
+        )
     })?;
-    let numbers: Vec<f64> = from_value::<Vec<f64>>(value)
-        .map_err(|e| ApiError::invalid(BOX_FIELD, e.message))?;
+    let numbers: Vec<f64> =
+        from_value::<Vec<f64>>(value).map_err(|e| ApiError::invalid(BOX_FIELD, e.message))?;
     let b: [f64; 4] = numbers.as_slice().try_into().map_err(|_| {
         ApiError::invalid(
             BOX_FIELD,
@@ -302,7 +300,10 @@ mod tests {
 
     #[test]
     fn boxes_are_validated_naming_the_field() {
-        assert_eq!(parse_box(Some(serde_json::json!([1, 2, 3, 4]))).unwrap(), [1.0, 2.0, 3.0, 4.0]);
+        assert_eq!(
+            parse_box(Some(serde_json::json!([1, 2, 3, 4]))).unwrap(),
+            [1.0, 2.0, 3.0, 4.0]
+        );
         for bad in [
             serde_json::json!([1, 2, 3]),
             serde_json::json!([3, 2, 1, 4]),
@@ -310,9 +311,16 @@ mod tests {
             serde_json::json!("box"),
         ] {
             let e = parse_box(Some(bad.clone())).unwrap_err();
-            assert_eq!((e.status.as_u16(), e.field.as_deref()), (422, Some(BOX_FIELD)), "{bad}");
+            assert_eq!(
+                (e.status.as_u16(), e.field.as_deref()),
+                (422, Some(BOX_FIELD)),
+                "{bad}"
+            );
         }
-        assert_eq!(parse_box(None).unwrap_err().field.as_deref(), Some(BOX_FIELD));
+        assert_eq!(
+            parse_box(None).unwrap_err().field.as_deref(),
+            Some(BOX_FIELD)
+        );
         let img = DynamicImage::new_rgb8(64, 48);
         assert!(check_box_inside(&[0.0, 0.0, 64.0, 48.0], &img).is_ok());
         assert!(check_box_inside(&[0.0, 0.0, 64.5, 48.0], &img).is_err());

@@ -1,0 +1,329 @@
+//! The model configuration written next to the weights as `config.json`:
+//! architecture, ProMP settings, preprocessing, the output normalisation
+//! learnt from the training targets, the dataset it was trained on and the
+//! code version. Everything needed to rebuild the network before loading
+//! its tensors, validated on load.
+
+use super::preprocess::PreprocessConfig;
+use crate::promp::PrompConfig;
+use crate::{Error, Result};
+use serde::{Deserialize, Serialize};
+
+/// The format tag written into every `config.json`.
+pub const MODEL_FORMAT: &str = "dpmp-model/1";
+
+/// Which network maps the image to the weight distribution.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Arch {
+    /// Auto-encoder: encoder trained on reconstruction, then MLP heads.
+    Ae,
+    /// Variational auto-encoder (mu, log sigma^2, reparameterisation).
+    Vae,
+    /// Conditional VAE: latent concatenated with the normalised box centre.
+    Cvae,
+    /// CNN straight to the weight distribution, trained end to end.
+    Direct,
+}
+
+impl Arch {
+    /// Parse `ae | vae | cvae | direct`.
+    pub fn parse(text: &str) -> Result<Arch> {
+        match text {
+            "ae" => Ok(Arch::Ae),
+            "vae" => Ok(Arch::Vae),
+            "cvae" => Ok(Arch::Cvae),
+            "direct" => Ok(Arch::Direct),
+            other => Err(Error::invalid(
+                "arch",
+                format!("expected ae, vae, cvae or direct, got {other:?}"),
+            )),
+        }
+    }
+
+    /// The lowercase name (`"cvae"`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Arch::Ae => "ae",
+            Arch::Vae => "vae",
+            Arch::Cvae => "cvae",
+            Arch::Direct => "direct",
+        }
+    }
+
+    /// Whether the encoder is variational (mu and log-variance).
+    pub fn is_variational(self) -> bool {
+        matches!(self, Arch::Vae | Arch::Cvae)
+    }
+
+    /// Whether the architecture has an image decoder (trained in tp1).
+    pub fn has_decoder(self) -> bool {
+        !matches!(self, Arch::Direct)
+    }
+
+    /// Whether the heads (and decoder) see the box-centre condition.
+    pub fn is_conditional(self) -> bool {
+        matches!(self, Arch::Cvae)
+    }
+}
+
+/// Per-output affine map from the heads' raw outputs to weight means and
+/// covariance codes: `value = raw * scale + offset`, one entry per joint and
+/// output (`n_joints x (n_basis + n_basis (n_basis + 1) / 2)`, joint-major).
+/// Computed from the training targets so that the heads work in a
+/// well-scaled space; fixed (not trained).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct OutputNorm {
+    /// Added after scaling.
+    pub offset: Vec<f32>,
+    /// Multiplies the raw head output; strictly positive.
+    pub scale: Vec<f32>,
+}
+
+impl OutputNorm {
+    /// The identity map for `len` outputs.
+    pub fn identity(len: usize) -> OutputNorm {
+        OutputNorm {
+            offset: vec![0.0; len],
+            scale: vec![1.0; len],
+        }
+    }
+
+    fn validate(&self, len: usize) -> Result<()> {
+        for (name, values) in [("offset", &self.offset), ("scale", &self.scale)] {
+            if values.len() != len {
+                return Err(Error::invalid(
+                    format!("output_norm.{name}"),
+                    format!("expected {len} numbers, got {}", values.len()),
+                ));
+            }
+            if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+                return Err(Error::invalid(
+                    format!("output_norm.{name}[{i}]"),
+                    "must be a finite number",
+                ));
+            }
+        }
+        if let Some(i) = self.scale.iter().position(|&s| s <= 0.0) {
+            return Err(Error::invalid(
+                format!("output_norm.scale[{i}]"),
+                "must be positive",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Where the training data came from.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DatasetInfo {
+    /// The dataset directory as given on the command line.
+    pub dir: String,
+    /// SHA-256 of its `manifest.json` (hex).
+    pub manifest_sha256: String,
+    /// Number of training and validation targets.
+    pub n_train: usize,
+    /// Number of validation targets.
+    pub n_val: usize,
+}
+
+/// How the model was trained (recorded for reproduction).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TrainingSummary {
+    /// Seed of every random choice (init, shuffling, noise).
+    pub seed: u64,
+    /// Completed epochs per phase, e.g. `{"tp1": 40, "tp2": 60}`.
+    pub epochs: std::collections::BTreeMap<String, usize>,
+    /// Best validation loss per phase.
+    pub best_val_loss: std::collections::BTreeMap<String, f64>,
+    /// Mini-batch size.
+    pub batch: usize,
+    /// Peak learning rate.
+    pub lr: f64,
+    /// Weight of the covariance terms in Eq. 7 and Eq. 8.
+    pub alpha: f64,
+    /// Weight of the KL term in tp1 (variational encoders).
+    pub kl_weight: f64,
+    /// Wall-clock training time in seconds.
+    pub seconds: f64,
+}
+
+/// Everything needed to rebuild a network before loading its weights.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModelConfig {
+    /// Always [`MODEL_FORMAT`].
+    pub format: String,
+    /// Display name (the model directory's name by default).
+    pub name: String,
+    /// Network architecture.
+    pub arch: Arch,
+    /// Whether the encoder was latent-tuned (tp3, the paper's "l-" prefix).
+    pub latent_tuning: bool,
+    /// Latent vector size (the paper: 256).
+    pub latent_dim: usize,
+    /// Output channels of each encoder conv block (each halves the size).
+    pub encoder_channels: Vec<usize>,
+    /// Hidden layer widths of each per-joint MLP head.
+    pub head_hidden: Vec<usize>,
+    /// Negative slope of every LeakyReLU.
+    pub leaky_slope: f64,
+    /// Number of joints (7 for the Panda).
+    pub n_joints: usize,
+    /// ProMP basis settings of the predicted weights.
+    pub promp: PrompConfig,
+    /// Image preprocessing (identical in training and serving).
+    pub preprocess: PreprocessConfig,
+    /// Affine map of the head outputs (see [`OutputNorm`]).
+    pub output_norm: OutputNorm,
+    /// The dataset the weights were trained on, if any.
+    pub dataset: Option<DatasetInfo>,
+    /// Crate version that wrote the file.
+    pub code_version: String,
+    /// Training record, if trained.
+    pub training: Option<TrainingSummary>,
+}
+
+impl ModelConfig {
+    /// A default-sized configuration for `arch` with identity output
+    /// normalisation (training replaces it).
+    pub fn new(name: &str, arch: Arch) -> ModelConfig {
+        let promp = PrompConfig::default();
+        let mut config = ModelConfig {
+            format: MODEL_FORMAT.to_string(),
+            name: name.to_string(),
+            arch,
+            latent_tuning: false,
+            latent_dim: 256,
+            encoder_channels: vec![8, 16, 32, 32],
+            head_hidden: vec![256, 128, 64, 32],
+            leaky_slope: 0.2,
+            n_joints: 7,
+            promp,
+            preprocess: PreprocessConfig::default(),
+            output_norm: OutputNorm::identity(0),
+            dataset: None,
+            code_version: env!("CARGO_PKG_VERSION").to_string(),
+            training: None,
+        };
+        config.output_norm = OutputNorm::identity(config.n_joints * config.head_outputs());
+        config
+    }
+
+    /// Covariance code length per joint, `n (n + 1) / 2`.
+    pub fn code_len(&self) -> usize {
+        self.promp.n_basis * (self.promp.n_basis + 1) / 2
+    }
+
+    /// Outputs of one joint head: `n_basis` means plus the covariance code.
+    pub fn head_outputs(&self) -> usize {
+        self.promp.n_basis + self.code_len()
+    }
+
+    /// Size of the vector the heads read: latent plus 2 for the cVAE condition.
+    pub fn feature_dim(&self) -> usize {
+        self.latent_dim + if self.arch.is_conditional() { 2 } else { 0 }
+    }
+
+    /// Side of the feature map after the encoder's conv blocks.
+    pub fn encoded_side(&self) -> usize {
+        self.preprocess.input_size >> self.encoder_channels.len()
+    }
+
+    /// Check every field; errors name the field.
+    pub fn validate(&self) -> Result<()> {
+        if self.format != MODEL_FORMAT {
+            return Err(Error::invalid(
+                "format",
+                format!("expected {MODEL_FORMAT:?}, got {:?}", self.format),
+            ));
+        }
+        self.promp.validate().map_err(|e| e.within("promp"))?;
+        self.preprocess
+            .validate()
+            .map_err(|e| e.within("preprocess"))?;
+        check_range("latent_dim", self.latent_dim, 1, 4096)?;
+        check_range("n_joints", self.n_joints, 1, 16)?;
+        check_range("encoder_channels.len", self.encoder_channels.len(), 1, 6)?;
+        for (i, &c) in self.encoder_channels.iter().enumerate() {
+            check_range(&format!("encoder_channels[{i}]"), c, 1, 512)?;
+        }
+        check_range("head_hidden.len", self.head_hidden.len(), 0, 8)?;
+        for (i, &h) in self.head_hidden.iter().enumerate() {
+            check_range(&format!("head_hidden[{i}]"), h, 1, 4096)?;
+        }
+        let side = self.preprocess.input_size;
+        if side % (1 << self.encoder_channels.len()) != 0 || self.encoded_side() == 0 {
+            return Err(Error::invalid(
+                "preprocess.input_size",
+                format!(
+                    "{side} must be divisible by 2^{} (one halving per encoder block)",
+                    self.encoder_channels.len()
+                ),
+            ));
+        }
+        if !(self.leaky_slope.is_finite() && (0.0..1.0).contains(&self.leaky_slope)) {
+            return Err(Error::invalid("leaky_slope", "must be in [0, 1)"));
+        }
+        if self.latent_tuning && self.arch == Arch::Direct {
+            return Err(Error::invalid(
+                "latent_tuning",
+                "the direct model has no separate encoder to tune",
+            ));
+        }
+        self.output_norm
+            .validate(self.n_joints * self.head_outputs())
+    }
+}
+
+fn check_range(field: &str, value: usize, lo: usize, hi: usize) -> Result<()> {
+    if (lo..=hi).contains(&value) {
+        Ok(())
+    } else {
+        Err(Error::invalid(
+            field,
+            format!("must be in {lo}..={hi}, got {value}"),
+        ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_config_is_valid_and_round_trips() {
+        let config = ModelConfig::new("x", Arch::Cvae);
+        config.validate().unwrap();
+        assert_eq!(config.head_outputs(), 44);
+        assert_eq!(config.feature_dim(), 258);
+        assert_eq!(config.encoded_side(), 8);
+        let text = serde_json::to_string(&config).unwrap();
+        let back: ModelConfig = serde_json::from_str(&text).unwrap();
+        assert_eq!(back, config);
+    }
+
+    #[test]
+    fn invalid_fields_are_named() {
+        let mut config = ModelConfig::new("x", Arch::Ae);
+        config.encoder_channels = vec![8; 8];
+        assert_eq!(
+            config.validate().unwrap_err().field(),
+            Some("encoder_channels.len")
+        );
+        let mut config = ModelConfig::new("x", Arch::Ae);
+        config.output_norm.scale[3] = 0.0;
+        assert_eq!(
+            config.validate().unwrap_err().field(),
+            Some("output_norm.scale[3]")
+        );
+        let mut config = ModelConfig::new("x", Arch::Direct);
+        config.latent_tuning = true;
+        assert_eq!(
+            config.validate().unwrap_err().field(),
+            Some("latent_tuning")
+        );
+        assert!(Arch::parse("gan").is_err());
+        assert_eq!(Arch::parse("cvae").unwrap(), Arch::Cvae);
+    }
+}

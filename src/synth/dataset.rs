@@ -1,0 +1,378 @@
+//! The synthetic dataset on disk (`dpmp-dataset/1`):
+//!
+//! ```text
+//! DIR/manifest.json                written last (temp file + rename)
+//! DIR/images/<target_id>.png       640x480 RGB, target berry boxed in white
+//! DIR/targets/<target_id>.json     one TargetRecord per target
+//! ```
+//!
+//! `target_id` is `c{config:04}_b{berry:02}`. The types here are the
+//! contract with the network, training, evaluation and benchmark code;
+//! loaders validate shapes and finiteness and name the file and field.
+
+use crate::error::{ensure_finite, ensure_len};
+use crate::promp::annotation::JointAnnotation;
+use crate::promp::PrompConfig;
+use crate::scene::SceneFile;
+use crate::synth::camera::Intrinsics;
+use crate::synth::settings::SynthSettings;
+use crate::{Error, Result};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// The format tag in every manifest.
+pub const FORMAT: &str = "dpmp-dataset/1";
+
+/// `c{config:04}_b{berry:02}`.
+pub fn target_id(config: usize, berry: usize) -> String {
+    format!("c{config:04}_b{berry:02}")
+}
+
+/// Train / validation / test target ids (split by configuration).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Splits {
+    /// Training targets.
+    pub train: Vec<String>,
+    /// Validation targets.
+    pub val: Vec<String>,
+    /// Test targets.
+    pub test: Vec<String>,
+}
+
+/// One manifest entry.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TargetEntry {
+    /// Target id.
+    pub id: String,
+    /// Configuration index.
+    pub config: usize,
+    /// Berry index within the configuration.
+    pub berry: usize,
+    /// Image path relative to the dataset directory.
+    pub image: String,
+    /// Record path relative to the dataset directory.
+    pub record: String,
+}
+
+impl TargetEntry {
+    /// The entry of target (`config`, `berry`) with the standard paths.
+    pub fn new(config: usize, berry: usize) -> TargetEntry {
+        let id = target_id(config, berry);
+        TargetEntry {
+            image: format!("images/{id}.png"),
+            record: format!("targets/{id}.json"),
+            id,
+            config,
+            berry,
+        }
+    }
+}
+
+/// `manifest.json`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Manifest {
+    /// Always [`FORMAT`].
+    pub format: String,
+    /// Crate version that generated the data.
+    pub generator_version: String,
+    /// Generator seed.
+    pub seed: u64,
+    /// Every generator setting.
+    pub settings: SynthSettings,
+    /// ProMP basis of every record.
+    pub promp: PrompConfig,
+    /// Camera intrinsics of every image.
+    pub camera: Intrinsics,
+    /// Split by configuration.
+    pub splits: Splits,
+    /// Every target, in (config, berry) order.
+    pub targets: Vec<TargetEntry>,
+}
+
+impl Manifest {
+    /// Entries of one split: `"train" | "val" | "test" | "all"`.
+    pub fn split(&self, name: &str) -> Result<Vec<&TargetEntry>> {
+        let ids = match name {
+            "all" => return Ok(self.targets.iter().collect()),
+            "train" => &self.splits.train,
+            "val" => &self.splits.val,
+            "test" => &self.splits.test,
+            other => {
+                return Err(Error::invalid(
+                    "split",
+                    format!("expected train, val, test or all, got {other:?}"),
+                ))
+            }
+        };
+        ids.iter()
+            .map(|id| {
+                self.targets.iter().find(|t| &t.id == id).ok_or_else(|| {
+                    Error::invalid(
+                        format!("splits.{name}"),
+                        format!("lists {id:?}, which is not among the targets"),
+                    )
+                })
+            })
+            .collect()
+    }
+
+    fn validate(&self) -> Result<()> {
+        if self.format != FORMAT {
+            return Err(Error::invalid(
+                "format",
+                format!("expected {FORMAT:?}, got {:?}", self.format),
+            ));
+        }
+        for (i, t) in self.targets.iter().enumerate() {
+            if t.id != target_id(t.config, t.berry) {
+                return Err(Error::invalid(
+                    format!("targets[{i}].id"),
+                    format!("{:?} does not match config/berry", t.id),
+                ));
+            }
+            for (name, p) in [("image", &t.image), ("record", &t.record)] {
+                relative_path(p).map_err(|e| e.within(&format!("targets[{i}].{name}")))?;
+            }
+        }
+        for name in ["train", "val", "test"] {
+            self.split(name)?;
+        }
+        Ok(())
+    }
+}
+
+/// A pose: position and unit quaternion `[x, y, z, w]`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Pose {
+    /// Position (m, base frame).
+    pub position: [f64; 3],
+    /// Orientation `[x, y, z, w]`.
+    pub quaternion: [f64; 4],
+}
+
+/// One demonstration, reduced to what training needs.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Demo {
+    /// Joint-major ProMP weights (n_joints * n_basis).
+    pub weights: Vec<f64>,
+    /// Final configuration (rad).
+    pub final_q: Vec<f64>,
+}
+
+/// Full weight distribution as plain arrays.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DistributionJson {
+    /// Mean (n_joints * n_basis).
+    pub mean: Vec<f64>,
+    /// Covariance rows.
+    pub cov: Vec<Vec<f64>>,
+}
+
+/// `targets/<id>.json`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TargetRecord {
+    /// Target id.
+    pub id: String,
+    /// Configuration index.
+    pub config: usize,
+    /// Berry index.
+    pub berry: usize,
+    /// Image path relative to the dataset directory.
+    pub image: String,
+    /// Target box `[x1, y1, x2, y2]` (px).
+    #[serde(rename = "box")]
+    pub bbox: [f64; 4],
+    /// Box centre `[cx, cy]` (px).
+    pub center: [f64; 2],
+    /// The whole configuration as obstacles (request schema).
+    pub scene: SceneFile,
+    /// Id of the target berry among the obstacles.
+    pub target_obstacle_id: String,
+    /// Target berry centre (m).
+    pub target_position: [f64; 3],
+    /// Mean demonstration start (rad).
+    pub start: Vec<f64>,
+    /// Mean final TCP pose.
+    pub final_tcp: Pose,
+    /// Demonstration duration (s).
+    pub duration_s: f64,
+    /// ProMP basis.
+    pub promp: PrompConfig,
+    /// The demonstrations.
+    pub demos: Vec<Demo>,
+    /// Full (joint-coupled) weight distribution.
+    pub distribution: DistributionJson,
+    /// The paper's per-joint annotation (Raw diagonal).
+    pub annotation: Vec<JointAnnotation>,
+}
+
+impl TargetRecord {
+    /// Shape and finiteness checks (errors name the field).
+    pub fn validate(&self) -> Result<()> {
+        let n_joints = self.start.len();
+        if n_joints == 0 {
+            return Err(Error::invalid("start", "must not be empty"));
+        }
+        self.promp.validate().map_err(|e| e.within("promp"))?;
+        let n_w = n_joints * self.promp.n_basis;
+        ensure_finite("box", &self.bbox)?;
+        if self.bbox[0] > self.bbox[2] || self.bbox[1] > self.bbox[3] {
+            return Err(Error::invalid(
+                "box",
+                "must be [x1, y1, x2, y2] with x1 <= x2 and y1 <= y2",
+            ));
+        }
+        ensure_finite("center", &self.center)?;
+        ensure_finite("target_position", &self.target_position)?;
+        ensure_finite("start", &self.start)?;
+        ensure_finite("final_tcp.position", &self.final_tcp.position)?;
+        ensure_finite("final_tcp.quaternion", &self.final_tcp.quaternion)?;
+        if !(self.duration_s.is_finite() && self.duration_s > 0.0) {
+            return Err(Error::invalid("duration_s", "must be a finite number > 0"));
+        }
+        for (i, d) in self.demos.iter().enumerate() {
+            ensure_len(&format!("demos[{i}].weights"), &d.weights, n_w)?;
+            ensure_finite(&format!("demos[{i}].weights"), &d.weights)?;
+            ensure_len(&format!("demos[{i}].final_q"), &d.final_q, n_joints)?;
+            ensure_finite(&format!("demos[{i}].final_q"), &d.final_q)?;
+        }
+        ensure_len("distribution.mean", &self.distribution.mean, n_w)?;
+        ensure_finite("distribution.mean", &self.distribution.mean)?;
+        if self.distribution.cov.len() != n_w {
+            return Err(Error::invalid(
+                "distribution.cov",
+                format!("expected {n_w} rows, got {}", self.distribution.cov.len()),
+            ));
+        }
+        for (i, row) in self.distribution.cov.iter().enumerate() {
+            ensure_len(&format!("distribution.cov[{i}]"), row, n_w)?;
+            ensure_finite(&format!("distribution.cov[{i}]"), row)?;
+        }
+        if self.annotation.len() != n_joints {
+            return Err(Error::invalid(
+                "annotation",
+                format!("expected {n_joints} joints, got {}", self.annotation.len()),
+            ));
+        }
+        let n_l = self.promp.n_basis * (self.promp.n_basis + 1) / 2;
+        for (j, a) in self.annotation.iter().enumerate() {
+            ensure_len(
+                &format!("annotation[{j}].mean_weights"),
+                &a.mean_weights,
+                self.promp.n_basis,
+            )?;
+            ensure_finite(&format!("annotation[{j}].mean_weights"), &a.mean_weights)?;
+            ensure_len(&format!("annotation[{j}].L"), &a.l, n_l)?;
+            ensure_finite(&format!("annotation[{j}].L"), &a.l)?;
+        }
+        Ok(())
+    }
+
+    /// The weight distribution as a [`crate::promp::WeightDistribution`].
+    pub fn weight_distribution(&self) -> Result<crate::promp::WeightDistribution> {
+        let n = self.distribution.mean.len();
+        let mean = nalgebra::DVector::from_column_slice(&self.distribution.mean);
+        let cov = nalgebra::DMatrix::from_fn(n, n, |i, j| self.distribution.cov[i][j]);
+        crate::promp::WeightDistribution::new(mean, cov, self.start.len(), self.promp.n_basis)
+    }
+}
+
+/// A manifest path must be relative and stay inside the dataset directory.
+fn relative_path(p: &str) -> Result<PathBuf> {
+    let path = PathBuf::from(p);
+    let ok = !p.is_empty()
+        && path.is_relative()
+        && path
+            .components()
+            .all(|c| matches!(c, std::path::Component::Normal(_)));
+    if ok {
+        Ok(path)
+    } else {
+        Err(Error::invalid(
+            "",
+            format!("{p:?} must be a relative path inside the dataset directory"),
+        ))
+    }
+}
+
+fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::file(path, e.to_string()))?;
+    serde_json::from_str(&text).map_err(|e| Error::file(path, format!("malformed JSON: {e}")))
+}
+
+/// Read and validate `DIR/manifest.json`.
+pub fn load_manifest(dir: &Path) -> Result<Manifest> {
+    let path = dir.join("manifest.json");
+    let m: Manifest = read_json(&path)?;
+    m.validate()
+        .map_err(|e| Error::file(&path, e.to_string()))?;
+    Ok(m)
+}
+
+/// Read and validate the record of one entry.
+pub fn load_record(dir: &Path, entry: &TargetEntry) -> Result<TargetRecord> {
+    let path = dir.join(relative_path(&entry.record).map_err(|e| e.within("record"))?);
+    let r: TargetRecord = read_json(&path)?;
+    r.validate()
+        .map_err(|e| Error::file(&path, e.to_string()))?;
+    if r.id != entry.id {
+        return Err(Error::file(
+            &path,
+            format!(
+                "id {:?} does not match the manifest entry {:?}",
+                r.id, entry.id
+            ),
+        ));
+    }
+    Ok(r)
+}
+
+/// Read the image of one entry as 8-bit RGB.
+pub fn load_image(dir: &Path, entry: &TargetEntry) -> Result<image::RgbImage> {
+    let path = dir.join(relative_path(&entry.image).map_err(|e| e.within("image"))?);
+    let img =
+        image::open(&path).map_err(|e| Error::file(&path, format!("cannot read image: {e}")))?;
+    Ok(img.to_rgb8())
+}
+
+/// Write `bytes` to `path` atomically (temp file in the same directory, then rename).
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let dir = path.parent().unwrap_or_else(|| Path::new("."));
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let tmp = dir.join(format!(".{name}.tmp{}", std::process::id()));
+    let result = std::fs::write(&tmp, bytes).and_then(|_| std::fs::rename(&tmp, path));
+    if let Err(e) = result {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(Error::file(path, format!("cannot write: {e}")));
+    }
+    Ok(())
+}
+
+/// Serialise `value` as pretty JSON to `path` atomically.
+pub fn write_json_atomic<T: Serialize>(path: &Path, value: &T) -> Result<()> {
+    let text = serde_json::to_vec_pretty(value)
+        .map_err(|e| Error::file(path, format!("cannot serialise: {e}")))?;
+    write_atomic(path, &text)
+}
+
+/// Encode an image as PNG and write it atomically.
+pub fn write_png_atomic(path: &Path, img: &image::RgbImage) -> Result<()> {
+    let mut bytes = Vec::new();
+    let encoder = image::codecs::png::PngEncoder::new_with_quality(
+        &mut bytes,
+        image::codecs::png::CompressionType::Fast,
+        image::codecs::png::FilterType::Sub,
+    );
+    image::ImageEncoder::write_image(
+        encoder,
+        img.as_raw(),
+        img.width(),
+        img.height(),
+        image::ExtendedColorType::Rgb8,
+    )
+    .map_err(|e| Error::file(path, format!("cannot encode PNG: {e}")))?;
+    write_atomic(path, &bytes)
+}

@@ -1,0 +1,442 @@
+//! The parallel dataset driver behind `dpmp data generate`.
+//!
+//! [`Generator::new`] checks everything before any file is written (settings,
+//! the camera posed by forward kinematics at home, the region in view and
+//! reachable). [`Generator::config`] makes one configuration in memory:
+//! plant, demonstrations for every berry (the whole configuration is drawn
+//! again when a berry has no valid demonstration, a bounded number of
+//! times), one render, and per target the noisy image with its white box
+//! and the record. Every configuration has its own ChaCha8 stream derived
+//! from the seed, so the output is byte-identical for any worker count.
+//! [`generate`] runs the configurations on a rayon pool, writes images and
+//! records atomically as they finish and the manifest last.
+
+use crate::promp::{Basis, PrompConfig};
+use crate::robot::{IkOptions, IkTarget, Robot};
+use crate::scene::Scene;
+use crate::synth::camera::{Camera, Intrinsics};
+use crate::synth::dataset::{self, DistributionJson, Manifest, Splits, TargetEntry, TargetRecord};
+use crate::synth::demos::{approach_axis, DemoContext, TargetDemos};
+use crate::synth::obstacles::plant_scene_file;
+use crate::synth::plant::{sample_plant, Plant};
+use crate::synth::render::{box_center, render_plant, target_box, target_image};
+use crate::synth::settings::SynthSettings;
+use crate::{Error, Result};
+use image::RgbImage;
+use nalgebra::{Point3, Vector3};
+use rand::seq::SliceRandom;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+use std::path::{Path, PathBuf};
+
+/// A validated generator: settings, robot, basis and the posed camera.
+pub struct Generator {
+    settings: SynthSettings,
+    robot: Robot,
+    basis: Basis,
+    camera: Camera,
+}
+
+/// One configuration, in memory.
+pub struct ConfigOutput {
+    /// One record per berry.
+    pub records: Vec<TargetRecord>,
+    /// One image per berry.
+    pub images: Vec<RgbImage>,
+    /// Draws of the configuration that were needed (1 = first draw accepted).
+    pub attempts: usize,
+}
+
+/// The RNG of configuration `config` under `seed` (its own ChaCha8 stream).
+pub fn config_rng(seed: u64, config: usize) -> ChaCha8Rng {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    rng.set_stream(config as u64);
+    rng
+}
+
+impl Generator {
+    /// Validate `settings` against the robot: the camera is posed by FK at
+    /// home, the region must be in view and its centre and corners reachable
+    /// at the pre-grasp standoff.
+    pub fn new(settings: SynthSettings, robot: Robot) -> Result<Generator> {
+        settings.validate()?;
+        if settings.demos.null_space_std_rad.len() != robot.dof() {
+            return Err(Error::invalid(
+                "demos.null_space_std_rad",
+                format!(
+                    "expected {} numbers (one per joint), got {}",
+                    robot.dof(),
+                    settings.demos.null_space_std_rad.len()
+                ),
+            ));
+        }
+        let basis = Basis::new(&PrompConfig::default())?;
+        let home_pose = robot.tcp_pose(&robot.home());
+        let tcp = Point3::from(home_pose.translation.vector);
+        let axis = home_pose.rotation * Vector3::z();
+        let camera = Camera::on_gripper(&settings.camera, tcp, axis)?;
+        let g = Generator {
+            settings,
+            robot,
+            basis,
+            camera,
+        };
+        g.check_region_in_view()?;
+        g.check_region_reachable()?;
+        Ok(g)
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &SynthSettings {
+        &self.settings
+    }
+
+    /// The gripper camera at home.
+    pub fn camera(&self) -> &Camera {
+        &self.camera
+    }
+
+    /// The robot.
+    pub fn robot(&self) -> &Robot {
+        &self.robot
+    }
+
+    /// The ProMP basis of the records.
+    pub fn basis(&self) -> &Basis {
+        &self.basis
+    }
+
+    fn home_tcp(&self) -> Point3<f64> {
+        Point3::from(self.robot.tcp_pose(&self.robot.home()).translation.vector)
+    }
+
+    fn check_region_in_view(&self) -> Result<()> {
+        let c = Point3::from(self.settings.plant.region.center());
+        let inside = self
+            .camera
+            .project(&c)
+            .is_some_and(|(uv, _)| self.camera.box_inside(&[uv[0], uv[1], uv[0], uv[1]], 0.0));
+        if inside {
+            Ok(())
+        } else {
+            Err(Error::invalid(
+                "plant.region",
+                format!(
+                    "its centre {:?} is outside the gripper camera's view at home",
+                    self.settings.plant.region.center()
+                ),
+            ))
+        }
+    }
+
+    fn check_region_reachable(&self) -> Result<()> {
+        let region = &self.settings.plant.region;
+        let home = self.robot.home();
+        let tcp = self.home_tcp();
+        for p in std::iter::once(region.center()).chain(region.corners()) {
+            let berry = Point3::from(p);
+            let axis = approach_axis(&tcp, &berry).map_err(|e| e.within("plant.region"))?;
+            let target = IkTarget {
+                position: berry - axis.into_inner() * self.settings.demos.standoff_m,
+                approach_axis: Some(axis),
+            };
+            let sol = self.robot.ik(&target, &home, &IkOptions::default())?;
+            if !sol.converged {
+                return Err(Error::invalid(
+                    "plant.region",
+                    format!(
+                        "unreachable: the pre-grasp pose for a berry at {p:?} has no IK solution \
+                         (position error {:.3} m, axis error {:.3} rad)",
+                        sol.position_error_m, sol.axis_error_rad
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Generate configuration `config` under `seed`.
+    pub fn config(&self, seed: u64, config: usize) -> Result<ConfigOutput> {
+        let mut rng = config_rng(seed, config);
+        let mut last = String::new();
+        for attempt in 1..=self.settings.demos.max_config_tries {
+            let plant = sample_plant(
+                &self.settings.plant,
+                &self.camera,
+                self.settings.camera.border_px,
+                self.settings.berries_per_config,
+                &mut rng,
+            )?;
+            match self.demos_for(&plant, &mut rng) {
+                Ok((scene_file, demos)) => {
+                    let (records, images) =
+                        self.finish(config, &plant, scene_file, demos, &mut rng)?;
+                    return Ok(ConfigOutput {
+                        records,
+                        images,
+                        attempts: attempt,
+                    });
+                }
+                Err(Error::Infeasible(reason)) => last = reason,
+                Err(other) => return Err(other),
+            }
+        }
+        Err(Error::Infeasible(format!(
+            "configuration {config}: gave up after {} plant draws; last: {last}",
+            self.settings.demos.max_config_tries
+        )))
+    }
+
+    fn demos_for(
+        &self,
+        plant: &Plant,
+        rng: &mut ChaCha8Rng,
+    ) -> Result<(crate::scene::SceneFile, Vec<TargetDemos>)> {
+        let scene_file = plant_scene_file(plant);
+        let scene = Scene::new(scene_file.obstacles.clone())?;
+        let ctx = DemoContext {
+            robot: &self.robot,
+            scene: &scene,
+            basis: &self.basis,
+            settings: &self.settings.demos,
+        };
+        let demos = plant
+            .berries
+            .iter()
+            .map(|b| ctx.target(&b.center, &b.id, rng))
+            .collect::<Result<Vec<_>>>()?;
+        Ok((scene_file, demos))
+    }
+
+    fn finish(
+        &self,
+        config: usize,
+        plant: &Plant,
+        scene: crate::scene::SceneFile,
+        demos: Vec<TargetDemos>,
+        rng: &mut ChaCha8Rng,
+    ) -> Result<(Vec<TargetRecord>, Vec<RgbImage>)> {
+        let base = render_plant(plant, &self.camera, &self.settings.render, rng);
+        let mut records = Vec::with_capacity(demos.len());
+        let mut images = Vec::with_capacity(demos.len());
+        for (i, (berry, td)) in plant.berries.iter().zip(demos).enumerate() {
+            let bbox = target_box(&self.camera, berry).ok_or_else(|| {
+                Error::Numerical(format!("berry {} is behind the camera", berry.id))
+            })?;
+            let noise = self.settings.render.noise_std.sample(rng);
+            images.push(target_image(&base, &bbox, noise, rng));
+            records.push(self.record(config, i, berry, bbox, scene.clone(), td));
+        }
+        Ok((records, images))
+    }
+
+    fn record(
+        &self,
+        config: usize,
+        index: usize,
+        berry: &crate::synth::plant::Berry,
+        bbox: [f64; 4],
+        scene: crate::scene::SceneFile,
+        td: TargetDemos,
+    ) -> TargetRecord {
+        let entry = TargetEntry::new(config, index);
+        let n = td.distribution.mean.len();
+        TargetRecord {
+            id: entry.id,
+            config,
+            berry: index,
+            image: entry.image,
+            bbox,
+            center: box_center(&bbox),
+            scene,
+            target_obstacle_id: berry.id.clone(),
+            target_position: [berry.center.x, berry.center.y, berry.center.z],
+            start: td.start,
+            final_tcp: td.final_tcp,
+            duration_s: self.settings.demos.duration_s,
+            promp: self.basis.config().clone(),
+            demos: td
+                .demos
+                .iter()
+                .map(|d| dataset::Demo {
+                    weights: d.weights.iter().copied().collect(),
+                    final_q: d.final_q(),
+                })
+                .collect(),
+            distribution: DistributionJson {
+                mean: td.distribution.mean.iter().copied().collect(),
+                cov: (0..n)
+                    .map(|i| td.distribution.cov.row(i).iter().copied().collect())
+                    .collect(),
+            },
+            annotation: td.annotation,
+        }
+    }
+
+    /// The manifest for `seed` listing every target.
+    pub fn manifest(&self, seed: u64) -> Manifest {
+        let s = &self.settings;
+        let targets: Vec<TargetEntry> = (0..s.configs)
+            .flat_map(|c| (0..s.berries_per_config).map(move |b| TargetEntry::new(c, b)))
+            .collect();
+        Manifest {
+            format: dataset::FORMAT.to_string(),
+            generator_version: env!("CARGO_PKG_VERSION").to_string(),
+            seed,
+            settings: s.clone(),
+            promp: self.basis.config().clone(),
+            camera: Intrinsics::from_settings(&s.camera),
+            splits: split_by_config(s, seed),
+            targets,
+        }
+    }
+}
+
+/// Train / val / test ids: configurations shuffled by the seed, never one
+/// configuration across sets.
+pub fn split_by_config(s: &SynthSettings, seed: u64) -> Splits {
+    let mut configs: Vec<usize> = (0..s.configs).collect();
+    configs.shuffle(&mut config_rng(seed, usize::MAX));
+    let n_val = (s.configs as f64 * s.split.val_fraction).round() as usize;
+    let n_test = (s.configs as f64 * s.split.test_fraction).round() as usize;
+    let (n_val, n_test) = if n_val + n_test >= s.configs {
+        (0, 0)
+    } else {
+        (n_val, n_test)
+    };
+    let ids = |cs: &[usize]| -> Vec<String> {
+        let mut cs = cs.to_vec();
+        cs.sort_unstable();
+        cs.iter()
+            .flat_map(|&c| (0..s.berries_per_config).map(move |b| dataset::target_id(c, b)))
+            .collect()
+    };
+    Splits {
+        val: ids(&configs[..n_val]),
+        test: ids(&configs[n_val..n_val + n_test]),
+        train: ids(&configs[n_val + n_test..]),
+    }
+}
+
+/// What a run did.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct GenerateSummary {
+    /// Output directory.
+    pub out: PathBuf,
+    /// Configurations written.
+    pub configs: usize,
+    /// Targets written.
+    pub targets: usize,
+    /// Configurations that needed more than one plant draw.
+    pub redrawn_configs: usize,
+    /// Wall time (s).
+    pub elapsed_s: f64,
+    /// Throughput.
+    pub targets_per_s: f64,
+}
+
+/// Options of [`generate`].
+#[derive(Clone, Debug)]
+pub struct GenerateOptions {
+    /// Output directory (created; must not already hold a dataset unless `overwrite`).
+    pub out: PathBuf,
+    /// Seed.
+    pub seed: u64,
+    /// Worker threads (`None`: rayon's default).
+    pub workers: Option<usize>,
+    /// Show a progress bar.
+    pub progress: bool,
+    /// Replace an existing dataset in `out`.
+    pub overwrite: bool,
+}
+
+/// Check the output directory before anything is written.
+pub fn check_output_dir(out: &Path, overwrite: bool) -> Result<()> {
+    if out.exists() && !out.is_dir() {
+        return Err(Error::invalid(
+            "out",
+            format!("{} exists and is not a directory", out.display()),
+        ));
+    }
+    if out.join("manifest.json").exists() && !overwrite {
+        return Err(Error::invalid(
+            "out",
+            format!(
+                "{} already holds a dataset (manifest.json); pass --overwrite to replace it",
+                out.display()
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Generate the whole dataset into `options.out`.
+pub fn generate(generator: &Generator, options: &GenerateOptions) -> Result<GenerateSummary> {
+    check_output_dir(&options.out, options.overwrite)?;
+    if let Some(0) = options.workers {
+        return Err(Error::invalid("workers", "must be >= 1"));
+    }
+    let started = std::time::Instant::now();
+    let out = &options.out;
+    let manifest_path = out.join("manifest.json");
+    if manifest_path.exists() {
+        std::fs::remove_file(&manifest_path)
+            .map_err(|e| Error::file(&manifest_path, e.to_string()))?;
+    }
+    for sub in ["images", "targets"] {
+        let d = out.join(sub);
+        std::fs::create_dir_all(&d)
+            .map_err(|e| Error::file(&d, format!("cannot create directory: {e}")))?;
+    }
+    let s = generator.settings();
+    let bar = progress_bar(options.progress, (s.configs * s.berries_per_config) as u64);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(options.workers.unwrap_or(0))
+        .build()
+        .map_err(|e| Error::Numerical(format!("cannot start the worker pool: {e}")))?;
+    let attempts = pool.install(|| {
+        (0..s.configs)
+            .into_par_iter()
+            .map(|c| {
+                let output = generator.config(options.seed, c)?;
+                write_config(out, &output)?;
+                bar.inc(output.records.len() as u64);
+                Ok(output.attempts)
+            })
+            .collect::<Result<Vec<usize>>>()
+    })?;
+    bar.finish_and_clear();
+    dataset::write_json_atomic(&manifest_path, &generator.manifest(options.seed))?;
+    let elapsed_s = started.elapsed().as_secs_f64();
+    let targets = s.configs * s.berries_per_config;
+    Ok(GenerateSummary {
+        out: out.clone(),
+        configs: s.configs,
+        targets,
+        redrawn_configs: attempts.iter().filter(|a| **a > 1).count(),
+        elapsed_s,
+        targets_per_s: targets as f64 / elapsed_s.max(1e-9),
+    })
+}
+
+fn write_config(out: &Path, output: &ConfigOutput) -> Result<()> {
+    for (record, image) in output.records.iter().zip(&output.images) {
+        dataset::write_png_atomic(&out.join(&record.image), image)?;
+        dataset::write_json_atomic(&out.join(format!("targets/{}.json", record.id)), record)?;
+    }
+    Ok(())
+}
+
+fn progress_bar(show: bool, len: u64) -> indicatif::ProgressBar {
+    if !show {
+        return indicatif::ProgressBar::hidden();
+    }
+    let bar = indicatif::ProgressBar::new(len);
+    if let Ok(style) = indicatif::ProgressStyle::with_template(
+        "{bar:40} {pos}/{len} targets  {per_sec}  eta {eta}",
+    ) {
+        bar.set_style(style);
+    }
+    bar
+}

@@ -1,0 +1,312 @@
+//! The paper's evaluation on a dataset split:
+//!
+//! - Table I: the Eq. 7 loss per joint (mean-trajectory and covariance
+//!   terms), averaged over targets;
+//! - Table III: final-point TCP position error (m) and quaternion distance
+//!   `min(|q - q'|, |q + q'|)` (Eq. 9) between the predicted and the
+//!   ground-truth distribution, for the mean trajectory and for the
+//!   trajectories 3 sigma above and below it (joint space);
+//! - Table II: the Davies–Bouldin index of a 2-D embedding of the latent
+//!   vectors labelled by plant configuration, with a scatter plot.
+//!
+//! Forward kinematics is passed in (`crate::robot::Robot::tcp_pose` in the
+//! CLI), so this module does not depend on a particular robot.
+
+use super::data::{target_tensors, Sample};
+use super::embedding::{davies_bouldin, embed, plot_embedding, Embedding};
+use super::losses::TrajectoryOperator;
+use crate::net::checkpoint::write_atomic;
+use crate::net::predict::predictions_from_outputs;
+use crate::net::{candle_error, Model};
+use crate::promp::{Basis, WeightDistribution};
+use crate::{Error, Result};
+use nalgebra::{Isometry3, UnitQuaternion};
+use serde::Serialize;
+use std::path::Path;
+
+/// Forward kinematics of the TCP: joint positions to base-frame pose.
+pub type TcpFk<'a> = &'a (dyn Fn(&[f64]) -> Isometry3<f64> + Sync);
+
+/// Table I row: Eq. 7 terms of one joint.
+#[derive(Clone, Debug, Serialize)]
+pub struct JointRow {
+    /// Joint number, from 1.
+    pub joint: usize,
+    /// Mean squared error of the mean trajectory (rad^2).
+    pub mean_mse: f64,
+    /// Mean squared error of the trajectory covariance (rad^4).
+    pub cov_mse: f64,
+    /// `mean_mse + alpha * cov_mse`.
+    pub eq7: f64,
+    /// Root of `mean_mse` (rad), easier to read.
+    pub mean_rmse_rad: f64,
+}
+
+/// Final-point errors of one trajectory kind (Table III cell pair).
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct FinalPointError {
+    /// Mean TCP position error (m).
+    pub position_m: f64,
+    /// Mean quaternion distance (Eq. 9).
+    pub orientation: f64,
+    /// Largest TCP position error (m).
+    pub max_position_m: f64,
+}
+
+/// Table III: mean and +-3 sigma trajectories, joint space.
+#[derive(Clone, Debug, Serialize)]
+pub struct FinalPointTable {
+    /// The mean trajectory.
+    pub mean: FinalPointError,
+    /// Mean + 3 sigma (per-joint final-time marginal).
+    pub plus_3sigma: FinalPointError,
+    /// Mean - 3 sigma.
+    pub minus_3sigma: FinalPointError,
+}
+
+/// Table II: latent-space clustering.
+#[derive(Clone, Debug, Serialize)]
+pub struct LatentTable {
+    /// Embedding method.
+    pub method: String,
+    /// Davies–Bouldin index by plant configuration (lower is better);
+    /// `None` with fewer than two configurations.
+    pub davies_bouldin: Option<f64>,
+    /// Number of configurations (clusters).
+    pub clusters: usize,
+}
+
+/// The whole evaluation report (written as JSON and Markdown).
+#[derive(Clone, Debug, Serialize)]
+pub struct EvalReport {
+    /// Model name.
+    pub model: String,
+    /// Architecture (`cvae`...).
+    pub arch: String,
+    /// Whether the model was latent-tuned.
+    pub latent_tuning: bool,
+    /// Split evaluated.
+    pub split: String,
+    /// Number of targets.
+    pub targets: usize,
+    /// Covariance weight used in the Eq. 7 column.
+    pub alpha: f64,
+    /// Mean over targets of the mean-trajectory final TCP position error (m).
+    pub mean_final_position_error_m: f64,
+    /// Sum over joints of Table I's Eq. 7 column.
+    pub eq7_total: f64,
+    /// Table I.
+    pub table1: Vec<JointRow>,
+    /// Table II.
+    pub table2: LatentTable,
+    /// Table III.
+    pub table3: FinalPointTable,
+}
+
+/// Evaluate a model on samples; returns the report and the embedding.
+pub fn evaluate(
+    model: &Model,
+    samples: &[Sample],
+    split: &str,
+    alpha: f64,
+    fk: TcpFk,
+) -> Result<(EvalReport, Embedding)> {
+    if samples.is_empty() {
+        return Err(Error::invalid(
+            "split",
+            format!("split {split:?} has no targets"),
+        ));
+    }
+    let config = model.config();
+    let basis = Basis::new(&config.promp)?;
+    let op = TrajectoryOperator::new(&basis, model.network().device()).map_err(candle_error)?;
+    let mut sums = vec![(0.0, 0.0); config.n_joints];
+    let mut latents = Vec::with_capacity(samples.len());
+    let mut finals = Vec::with_capacity(samples.len());
+    let indices: Vec<usize> = (0..samples.len()).collect();
+    for chunk in indices.chunks(16) {
+        let prepared: Vec<_> = chunk.iter().map(|&i| samples[i].prepared.clone()).collect();
+        let (latent, pred) = model.infer_batch(&prepared)?;
+        let predictions = predictions_from_outputs(&latent, &pred)?;
+        let (mean_t, cov_t) = target_tensors(samples, chunk, config, model.network().device())?;
+        let loss = op
+            .trajectory_loss(&pred, &mean_t, &cov_t, alpha)
+            .map_err(candle_error)?;
+        let m = loss.mean.to_vec1::<f32>().map_err(candle_error)?;
+        let c = loss.cov.to_vec1::<f32>().map_err(candle_error)?;
+        for j in 0..config.n_joints {
+            sums[j].0 += f64::from(m[j]) * chunk.len() as f64;
+            sums[j].1 += f64::from(c[j]) * chunk.len() as f64;
+        }
+        for (prediction, &i) in predictions.into_iter().zip(chunk) {
+            finals.push(final_point_errors(
+                &prediction.distribution,
+                &samples[i].distribution,
+                &basis,
+                fk,
+            ));
+            latents.push(prediction.latent);
+        }
+    }
+    let n = samples.len() as f64;
+    let table1: Vec<JointRow> = sums
+        .iter()
+        .enumerate()
+        .map(|(j, &(m, c))| JointRow {
+            joint: j + 1,
+            mean_mse: m / n,
+            cov_mse: c / n,
+            eq7: m / n + alpha * c / n,
+            mean_rmse_rad: (m / n).sqrt(),
+        })
+        .collect();
+    let table3 = FinalPointTable {
+        mean: average(finals.iter().map(|f| f[0])),
+        plus_3sigma: average(finals.iter().map(|f| f[1])),
+        minus_3sigma: average(finals.iter().map(|f| f[2])),
+    };
+    let labels: Vec<usize> = samples.iter().map(|s| s.config).collect();
+    let embedding = embed(&latents, &labels);
+    let mut clusters = labels.clone();
+    clusters.sort_unstable();
+    clusters.dedup();
+    let report = EvalReport {
+        model: config.name.clone(),
+        arch: config.arch.as_str().into(),
+        latent_tuning: config.latent_tuning,
+        split: split.into(),
+        targets: samples.len(),
+        alpha,
+        mean_final_position_error_m: table3.mean.position_m,
+        eq7_total: table1.iter().map(|r| r.eq7).sum(),
+        table1,
+        table2: LatentTable {
+            method: embedding.method.clone(),
+            davies_bouldin: davies_bouldin(&embedding.points, &embedding.labels),
+            clusters: clusters.len(),
+        },
+        table3,
+    };
+    Ok((report, embedding))
+}
+
+/// Errors of the mean, +3 sigma and -3 sigma final configurations.
+fn final_point_errors(
+    predicted: &WeightDistribution,
+    truth: &WeightDistribution,
+    basis: &Basis,
+    fk: TcpFk,
+) -> [FinalPointError; 3] {
+    let (p_mean, p_std) = final_marginal(predicted, basis);
+    let (t_mean, t_std) = final_marginal(truth, basis);
+    let shifted = |mean: &[f64], std: &[f64], k: f64| -> Vec<f64> {
+        mean.iter().zip(std).map(|(m, s)| m + k * s).collect()
+    };
+    [0.0, 3.0, -3.0].map(|k| {
+        let a = fk(&shifted(&p_mean, &p_std, k));
+        let b = fk(&shifted(&t_mean, &t_std, k));
+        let position = (a.translation.vector - b.translation.vector).norm();
+        FinalPointError {
+            position_m: position,
+            orientation: quaternion_distance(&a.rotation, &b.rotation),
+            max_position_m: position,
+        }
+    })
+}
+
+/// Per-joint mean and standard deviation at the final phase sample.
+pub fn final_marginal(distribution: &WeightDistribution, basis: &Basis) -> (Vec<f64>, Vec<f64>) {
+    let phi = basis.matrix().row(basis.n_samples() - 1).transpose();
+    (0..distribution.n_joints)
+        .map(|j| {
+            let (mean, cov) = distribution.joint_block(j);
+            let var = (phi.transpose() * &cov * &phi)[(0, 0)];
+            (phi.dot(&mean), var.max(0.0).sqrt())
+        })
+        .unzip()
+}
+
+/// Eq. 9: `min(|q - q'|, |q + q'|)` over quaternion coordinates.
+pub fn quaternion_distance(a: &UnitQuaternion<f64>, b: &UnitQuaternion<f64>) -> f64 {
+    let (a, b) = (a.coords, b.coords);
+    (a - b).norm().min((a + b).norm())
+}
+
+fn average(errors: impl Iterator<Item = FinalPointError>) -> FinalPointError {
+    let mut out = FinalPointError::default();
+    let mut n = 0.0;
+    for e in errors {
+        out.position_m += e.position_m;
+        out.orientation += e.orientation;
+        out.max_position_m = out.max_position_m.max(e.max_position_m);
+        n += 1.0;
+    }
+    if n > 0.0 {
+        out.position_m /= n;
+        out.orientation /= n;
+    }
+    out
+}
+
+/// Markdown rendering of the three tables.
+pub fn to_markdown(report: &EvalReport) -> String {
+    let mut s = format!(
+        "# Evaluation of {} ({}{}) on the {} split ({} targets)\n\n",
+        report.model,
+        if report.latent_tuning { "l-" } else { "" },
+        report.arch,
+        report.split,
+        report.targets
+    );
+    s += &format!(
+        "## Table I — Eq. 7 per joint (alpha = {})\n\n",
+        report.alpha
+    );
+    s += "| joint | mean MSE (rad²) | mean RMSE (rad) | cov MSE | Eq. 7 |\n|---|---|---|---|---|\n";
+    for r in &report.table1 {
+        s += &format!(
+            "| J{} | {:.3e} | {:.4} | {:.3e} | {:.3e} |\n",
+            r.joint, r.mean_mse, r.mean_rmse_rad, r.cov_mse, r.eq7
+        );
+    }
+    s += &format!("| total | | | | {:.3e} |\n\n", report.eq7_total);
+    s += "## Table II — latent clustering\n\n| method | clusters | Davies–Bouldin |\n|---|---|---|\n";
+    let db = report
+        .table2
+        .davies_bouldin
+        .map_or("n/a".to_string(), |v| format!("{v:.3}"));
+    s += &format!(
+        "| {} | {} | {} |\n\n",
+        report.table2.method, report.table2.clusters, db
+    );
+    s += "## Table III — final point, joint space\n\n| trajectory | position (m) | orientation (Eq. 9) | max position (m) |\n|---|---|---|---|\n";
+    for (name, e) in [
+        ("mean", &report.table3.mean),
+        ("+3σ", &report.table3.plus_3sigma),
+        ("−3σ", &report.table3.minus_3sigma),
+    ] {
+        s += &format!(
+            "| {name} | {:.4} | {:.4} | {:.4} |\n",
+            e.position_m, e.orientation, e.max_position_m
+        );
+    }
+    s
+}
+
+/// Write `eval.json`, `eval.md` and `embedding.png` into `dir`.
+pub fn write_outputs(dir: &Path, report: &EvalReport, embedding: &Embedding) -> Result<()> {
+    let json = serde_json::to_string_pretty(report)
+        .map_err(|e| Error::Numerical(format!("cannot serialise report: {e}")))?;
+    write_atomic(&dir.join("eval.json"), json.as_bytes())?;
+    write_atomic(&dir.join("eval.md"), to_markdown(report).as_bytes())?;
+    let title = format!(
+        "{} latent space ({}), DB = {}",
+        report.model,
+        embedding.method.split(' ').next().unwrap_or("embedding"),
+        report
+            .table2
+            .davies_bouldin
+            .map_or("n/a".into(), |v| format!("{v:.3}"))
+    );
+    plot_embedding(embedding, &title, &dir.join("embedding.png"))
+}

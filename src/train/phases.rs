@@ -1,0 +1,283 @@
+//! The training phases and their losses:
+//!
+//! - `tp1`: encoder + decoder on image reconstruction (+ KL for VAE/cVAE);
+//! - `tp2`: heads only on Eq. 7, encoder frozen — its outputs are computed
+//!   once per phase (evaluation mode) and cached, variational latents
+//!   re-sampled every batch;
+//! - `tp3`: latent tuning, encoder only on Eq. 8 with the heads frozen;
+//! - `direct`: encoder + heads end to end on Eq. 7 (the Direct baseline).
+
+use super::data::{make_batch, target_tensors, Sample};
+use super::losses::TrajectoryOperator;
+use crate::net::{candle_error, Network, ParamGroup};
+use crate::Result;
+use candle_core::{Device, Tensor};
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
+
+/// A training phase.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Phase {
+    /// Reconstruction.
+    Tp1,
+    /// Heads on Eq. 7.
+    Tp2,
+    /// Latent tuning on Eq. 8.
+    Tp3,
+    /// End to end on Eq. 7.
+    Direct,
+}
+
+impl Phase {
+    /// `tp1`, `tp2`, `tp3`, `direct`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Phase::Tp1 => "tp1",
+            Phase::Tp2 => "tp2",
+            Phase::Tp3 => "tp3",
+            Phase::Direct => "direct",
+        }
+    }
+
+    /// The parameter groups the phase trains.
+    pub fn groups(self) -> &'static [ParamGroup] {
+        match self {
+            Phase::Tp1 => &[ParamGroup::Encoder, ParamGroup::Decoder],
+            Phase::Tp2 => &[ParamGroup::Heads],
+            Phase::Tp3 => &[ParamGroup::Encoder],
+            Phase::Direct => &[ParamGroup::Encoder, ParamGroup::Heads],
+        }
+    }
+
+    /// Small stable number used to derive per-epoch random streams.
+    pub fn id(self) -> u64 {
+        match self {
+            Phase::Tp1 => 1,
+            Phase::Tp2 => 2,
+            Phase::Tp3 => 3,
+            Phase::Direct => 4,
+        }
+    }
+}
+
+/// Loss weights shared by the phases.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LossWeights {
+    /// Covariance weight in Eq. 7 / Eq. 8.
+    pub alpha: f64,
+    /// KL weight in tp1 (variational encoders).
+    pub kl_weight: f64,
+}
+
+/// Encoder outputs cached for tp2 (the encoder is frozen there).
+#[derive(Clone, Debug)]
+pub struct LatentCache {
+    mu: Tensor,
+    logvar: Option<Tensor>,
+}
+
+/// Everything a phase step reads.
+pub struct PhaseContext<'a> {
+    /// The network being trained.
+    pub network: &'a Network,
+    /// The trajectory-loss operator of the model's basis.
+    pub op: &'a TrajectoryOperator,
+    /// Loss weights.
+    pub weights: LossWeights,
+    /// Training samples.
+    pub train: &'a [Sample],
+    /// Validation samples.
+    pub val: &'a [Sample],
+    /// tp2 only: cached encoder outputs of the train and val samples.
+    pub cache: Option<(LatentCache, LatentCache)>,
+}
+
+/// Which sample set a loss is computed on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Split {
+    /// The training samples.
+    Train,
+    /// The validation samples.
+    Val,
+}
+
+/// Batch size used for evaluation-mode passes.
+const EVAL_BATCH: usize = 16;
+
+impl<'a> PhaseContext<'a> {
+    fn device(&self) -> &Device {
+        self.network.device()
+    }
+
+    /// Encode every sample in evaluation mode (for the tp2 cache).
+    pub fn encode_all(network: &Network, samples: &[Sample]) -> Result<LatentCache> {
+        let mut mus = Vec::new();
+        let mut logvars = Vec::new();
+        let indices: Vec<usize> = (0..samples.len()).collect();
+        for chunk in indices.chunks(EVAL_BATCH) {
+            let batch = make_batch(samples, chunk, network.config(), network.device())?;
+            let enc = network.encode(&batch.images, false).map_err(candle_error)?;
+            mus.push(enc.mu);
+            if let Some(lv) = enc.logvar {
+                logvars.push(lv);
+            }
+        }
+        let mu = Tensor::cat(&mus, 0).map_err(candle_error)?;
+        let logvar = if logvars.is_empty() {
+            None
+        } else {
+            Some(Tensor::cat(&logvars, 0).map_err(candle_error)?)
+        };
+        Ok(LatentCache { mu, logvar })
+    }
+
+    /// The training loss of one batch (train mode, sampled latents).
+    pub fn train_loss(
+        &self,
+        phase: Phase,
+        indices: &[usize],
+        rng: &mut ChaCha8Rng,
+    ) -> Result<Tensor> {
+        self.loss(phase, Split::Train, indices, Some(rng), true)
+    }
+
+    fn samples(&self, split: Split) -> &'a [Sample] {
+        match split {
+            Split::Train => self.train,
+            Split::Val => self.val,
+        }
+    }
+
+    /// Mean loss over a whole split in evaluation mode (latent means).
+    pub fn eval_loss(&self, phase: Phase, split: Split) -> Result<f64> {
+        let samples = self.samples(split);
+        if samples.is_empty() {
+            return Ok(f64::NAN);
+        }
+        let indices: Vec<usize> = (0..samples.len()).collect();
+        let mut total = 0.0;
+        for chunk in indices.chunks(EVAL_BATCH) {
+            let loss = self.loss(phase, split, chunk, None, false)?;
+            let value = loss.to_scalar::<f32>().map_err(candle_error)?;
+            total += f64::from(value) * chunk.len() as f64;
+        }
+        Ok(total / samples.len() as f64)
+    }
+
+    fn loss(
+        &self,
+        phase: Phase,
+        split: Split,
+        indices: &[usize],
+        rng: Option<&mut ChaCha8Rng>,
+        train: bool,
+    ) -> Result<Tensor> {
+        match phase {
+            Phase::Tp2 => self.heads_loss(split, indices, rng),
+            _ => self.end_to_end_loss(phase, self.samples(split), indices, rng, train),
+        }
+    }
+
+    fn end_to_end_loss(
+        &self,
+        phase: Phase,
+        samples: &[Sample],
+        indices: &[usize],
+        rng: Option<&mut ChaCha8Rng>,
+        train: bool,
+    ) -> Result<Tensor> {
+        let net = self.network;
+        let batch = make_batch(samples, indices, net.config(), self.device())?;
+        let enc = net.encode(&batch.images, train).map_err(candle_error)?;
+        let z = sample_latent(&enc.mu, enc.logvar.as_ref(), rng)?;
+        let features = net.features(&z, &batch.conditions).map_err(candle_error)?;
+        let w = self.weights;
+        let loss = match phase {
+            Phase::Tp1 => {
+                let recon = net
+                    .decode(&features)
+                    .map_err(candle_error)?
+                    .ok_or_else(|| crate::Error::invalid("arch", "tp1 needs a decoder"))?;
+                let mut loss = super::losses::reconstruction_loss(&recon, &batch.images);
+                if let (Some(lv), true) = (&enc.logvar, w.kl_weight > 0.0) {
+                    let kl = super::losses::kl_loss(&enc.mu, lv);
+                    loss = loss.and_then(|l| kl.and_then(|k| l + (k * w.kl_weight)?));
+                }
+                loss
+            }
+            Phase::Tp3 => {
+                let out = net.heads(&features).map_err(candle_error)?;
+                self.op
+                    .final_step_loss(&out, &batch.mean, &batch.cov, w.alpha)
+                    .map(|l| l.total)
+            }
+            Phase::Direct | Phase::Tp2 => {
+                let out = net.heads(&features).map_err(candle_error)?;
+                self.op
+                    .trajectory_loss(&out, &batch.mean, &batch.cov, w.alpha)
+                    .map(|l| l.total)
+            }
+        };
+        loss.map_err(candle_error)
+    }
+
+    fn heads_loss(
+        &self,
+        split: Split,
+        indices: &[usize],
+        rng: Option<&mut ChaCha8Rng>,
+    ) -> Result<Tensor> {
+        let (train_cache, val_cache) = self
+            .cache
+            .as_ref()
+            .ok_or_else(|| crate::Error::Numerical("tp2 needs the latent cache".into()))?;
+        let cache = match split {
+            Split::Train => train_cache,
+            Split::Val => val_cache,
+        };
+        let samples = self.samples(split);
+        let net = self.network;
+        let idx: Vec<u32> = indices.iter().map(|&i| i as u32).collect();
+        let idx = Tensor::new(idx.as_slice(), self.device()).map_err(candle_error)?;
+        let mu = cache.mu.index_select(&idx, 0).map_err(candle_error)?;
+        let logvar = match &cache.logvar {
+            Some(lv) => Some(lv.index_select(&idx, 0).map_err(candle_error)?),
+            None => None,
+        };
+        let z = sample_latent(&mu, logvar.as_ref(), rng)?;
+        let conditions = condition_tensor(samples, indices, self.device())?;
+        let features = net.features(&z, &conditions).map_err(candle_error)?;
+        let out = net.heads(&features).map_err(candle_error)?;
+        let (mean, cov) = target_tensors(samples, indices, net.config(), self.device())?;
+        self.op
+            .trajectory_loss(&out, &mean, &cov, self.weights.alpha)
+            .map(|l| l.total)
+            .map_err(candle_error)
+    }
+}
+
+fn condition_tensor(samples: &[Sample], indices: &[usize], device: &Device) -> Result<Tensor> {
+    let values: Vec<f32> = indices
+        .iter()
+        .flat_map(|&i| samples[i].prepared.condition)
+        .collect();
+    Tensor::from_vec(values, (indices.len(), 2), device).map_err(candle_error)
+}
+
+/// Reparameterisation: `mu + exp(logvar / 2) * eps` with `eps ~ N(0, I)`
+/// drawn from `rng`; the mean when there is no rng or no log-variance.
+pub fn sample_latent(
+    mu: &Tensor,
+    logvar: Option<&Tensor>,
+    rng: Option<&mut ChaCha8Rng>,
+) -> Result<Tensor> {
+    let (Some(lv), Some(rng)) = (logvar, rng) else {
+        return Ok(mu.clone());
+    };
+    let count = mu.elem_count();
+    let noise: Vec<f32> = (0..count).map(|_| rng.sample(StandardNormal)).collect();
+    let eps = Tensor::from_vec(noise, mu.dims(), mu.device()).map_err(candle_error)?;
+    let std = (lv * 0.5).and_then(|t| t.exp()).map_err(candle_error)?;
+    (mu + (std * eps).map_err(candle_error)?).map_err(candle_error)
+}
