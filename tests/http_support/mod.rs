@@ -10,9 +10,12 @@ use dpmp::service::{AppState, RunningServer, ServiceConfig};
 use serde_json::Value;
 use std::time::Duration;
 
-/// A config listening on an ephemeral loopback port.
+/// A config listening on an ephemeral loopback port, with a deadline long
+/// enough for debug builds on a loaded 2-core machine.
 pub fn test_config() -> ServiceConfig {
-    ServiceConfig::default().with_addr("127.0.0.1:0".parse().unwrap())
+    ServiceConfig::default()
+        .with_addr("127.0.0.1:0".parse().unwrap())
+        .with_deadline(Duration::from_secs(60))
 }
 
 /// Start a server with `config` (and the shipped robot, no model).
@@ -24,7 +27,7 @@ pub fn start(config: ServiceConfig) -> RunningServer {
 /// A blocking client with a generous timeout (tests must not hang).
 pub fn client() -> reqwest::blocking::Client {
     reqwest::blocking::Client::builder()
-        .timeout(Duration::from_secs(60))
+        .timeout(Duration::from_secs(120))
         .build()
         .unwrap()
 }
