@@ -1,13 +1,257 @@
-//! `dpmp serve` (being built).
+//! `dpmp serve`: run the HTTP service (see [`crate::service`]).
+//!
+//! ```text
+//! dpmp serve [--addr 127.0.0.1:8080] [--model models/default] [--robot models/panda/panda.urdf]
+//!            [--token-file FILE] [--body-limit-mib 16] [--max-pixels N] [--max-obstacles N]
+//!            [--max-samples N] [--deadline-ms 2000] [--concurrency N] [--queue N]
+//!            [--cors-origin URL]... [--log-json]
+//! ```
+//! The token may also come from `DPMP_API_TOKEN`; it is never logged.
+
+use crate::net::Model;
+use crate::robot::Robot;
+use crate::service::auth::{Token, TOKEN_ENV};
+use crate::service::{AppState, ServiceConfig};
+use crate::{Error, Result};
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
 
 /// Arguments of `dpmp serve`.
 #[derive(Debug, clap::Args)]
-pub struct ServeArgs {}
+pub struct ServeArgs {
+    /// Address to listen on.
+    #[arg(long, default_value = crate::service::config::DEFAULT_ADDR)]
+    pub addr: String,
+    /// Trained network directory (model.safetensors + config.json). Without
+    /// the flag `models/default` is used when present; otherwise the service
+    /// starts without a model and `/v1/plan` answers 503.
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// Robot URDF (default: the shipped Panda, models/panda/panda.urdf).
+    #[arg(long)]
+    pub robot: Option<PathBuf>,
+    /// Base link of the chain in `--robot`.
+    #[arg(long, default_value = "panda_link0")]
+    pub base_link: String,
+    /// Tip link of the chain in `--robot`.
+    #[arg(long, default_value = "panda_tcp")]
+    pub tip_link: String,
+    /// File holding the bearer token (overrides DPMP_API_TOKEN).
+    #[arg(long)]
+    pub token_file: Option<PathBuf>,
+    /// Largest request body in MiB.
+    #[arg(long, default_value_t = 16)]
+    pub body_limit_mib: usize,
+    /// Largest image in pixels (width x height), checked before decoding.
+    #[arg(long)]
+    pub max_pixels: Option<u64>,
+    /// Largest number of obstacles per request.
+    #[arg(long)]
+    pub max_obstacles: Option<usize>,
+    /// Largest number of extra samples per request.
+    #[arg(long)]
+    pub max_samples: Option<usize>,
+    /// Per-request deadline in milliseconds.
+    #[arg(long, default_value_t = 2000)]
+    pub deadline_ms: u64,
+    /// Solves running at once (default: CPU cores).
+    #[arg(long)]
+    pub concurrency: Option<usize>,
+    /// Requests allowed to wait for a solver before 429.
+    #[arg(long)]
+    pub queue: Option<usize>,
+    /// Allow CORS from this origin (repeatable; CORS is off without it).
+    #[arg(long = "cors-origin")]
+    pub cors_origins: Vec<String>,
+    /// Log as JSON lines instead of text.
+    #[arg(long)]
+    pub log_json: bool,
+    /// Print the typical /v1/optimize request for this seed (the load
+    /// benchmark's body: real-like prior, 10 obstacles, 150 samples, 2 cm
+    /// clearance) and exit without serving.
+    #[arg(long, value_name = "SEED")]
+    pub print_typical_request: Option<u64>,
+}
+
+/// Model directory tried when `--model` is not given.
+pub const DEFAULT_MODEL_DIR: &str = "models/default";
 
 /// Run `dpmp serve`.
-pub fn run(_args: ServeArgs) -> crate::Result<()> {
-    Err(crate::Error::invalid(
-        "command",
-        "`dpmp serve` is not available in this build yet",
-    ))
+pub fn run(args: ServeArgs) -> Result<()> {
+    init_logging(args.log_json);
+    let robot = load_robot(&args)?;
+    if let Some(seed) = args.print_typical_request {
+        let settings = crate::optim::example::ExampleSettings::default();
+        let request = crate::optim::example::typical_request(&robot, seed, &settings)?;
+        return crate::cli::print_json(&request);
+    }
+    let config = config_from_args(&args)?;
+    let model = load_model(args.model.as_deref())?;
+    let state = AppState::new(config, robot, model)?;
+    crate::service::serve(state)
+}
+
+/// The shipped Panda, or `--robot` with `--base-link`/`--tip-link`.
+fn load_robot(args: &ServeArgs) -> Result<Robot> {
+    match &args.robot {
+        None => Robot::panda(),
+        Some(path) => Robot::from_urdf_file(path, &args.base_link, &args.tip_link),
+    }
+}
+
+/// `--model DIR` must load; without the flag `models/default` is loaded
+/// when present, else the service runs without a model (with a warning).
+fn load_model(dir: Option<&Path>) -> Result<Option<Model>> {
+    let dir = match dir {
+        Some(dir) => dir,
+        None if Path::new(DEFAULT_MODEL_DIR).join("config.json").exists() => {
+            Path::new(DEFAULT_MODEL_DIR)
+        }
+        None => {
+            tracing::warn!(
+                "no model at {DEFAULT_MODEL_DIR}: /v1/plan will answer 503 model_unavailable \
+                 (train one, see the README, or pass --model DIR); /v1/optimize works"
+            );
+            return Ok(None);
+        }
+    };
+    let model = Model::load(dir)?;
+    tracing::info!(model = model.name(), dir = %dir.display(), "model loaded");
+    Ok(Some(model))
+}
+
+/// Build the [`ServiceConfig`] from the flags and the environment.
+pub fn config_from_args(args: &ServeArgs) -> Result<ServiceConfig> {
+    let defaults = ServiceConfig::default();
+    let addr: SocketAddr = args.addr.parse().map_err(|e| {
+        Error::invalid(
+            "--addr",
+            format!(
+                "expected HOST:PORT like 127.0.0.1:8080, got {:?}: {e}",
+                args.addr
+            ),
+        )
+    })?;
+    let body_limit_bytes = args
+        .body_limit_mib
+        .checked_mul(1 << 20)
+        .filter(|b| *b > 0 && args.body_limit_mib <= 1024)
+        .ok_or_else(|| Error::invalid("--body-limit-mib", "must be in 1..=1024"))?;
+    if args.deadline_ms == 0 || args.deadline_ms > 3_600_000 {
+        return Err(Error::invalid("--deadline-ms", "must be in 1..=3600000"));
+    }
+    let config = ServiceConfig {
+        addr,
+        body_limit_bytes,
+        max_image_pixels: args.max_pixels.unwrap_or(defaults.max_image_pixels),
+        max_obstacles: args.max_obstacles.unwrap_or(defaults.max_obstacles),
+        max_samples: args.max_samples.unwrap_or(defaults.max_samples),
+        deadline: Duration::from_millis(args.deadline_ms),
+        max_concurrency: args.concurrency.unwrap_or(defaults.max_concurrency),
+        max_queue: args.queue.unwrap_or(defaults.max_queue),
+        token: load_token(args.token_file.as_deref())?,
+        cors_origins: args.cors_origins.clone(),
+        ..defaults
+    };
+    config.validate().map_err(crate::cli::as_flag_error)?;
+    Ok(config)
+}
+
+/// The token from `--token-file`, else from `DPMP_API_TOKEN`, else none.
+fn load_token(file: Option<&std::path::Path>) -> Result<Option<Token>> {
+    if let Some(path) = file {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::file(path, e.to_string()))?;
+        return Token::new("--token-file", &text).map(Some);
+    }
+    match std::env::var(TOKEN_ENV) {
+        Ok(text) if !text.trim().is_empty() => Token::new(TOKEN_ENV, &text).map(Some),
+        _ => Ok(None),
+    }
+}
+
+/// Structured logs to stderr; `RUST_LOG` filters (default `info`).
+fn init_logging(json: bool) {
+    use tracing_subscriber::EnvFilter;
+    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
+    let builder = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr);
+    // A second initialisation (tests) is harmless and ignored.
+    let _ = if json {
+        builder.json().try_init()
+    } else {
+        builder.try_init()
+    };
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Debug, Parser)]
+    struct Wrapper {
+        #[command(flatten)]
+        args: ServeArgs,
+    }
+
+    fn parse(flags: &[&str]) -> ServeArgs {
+        let mut argv = vec!["serve"];
+        argv.extend_from_slice(flags);
+        Wrapper::try_parse_from(argv).unwrap().args
+    }
+
+    #[test]
+    fn flags_become_settings() {
+        let c = config_from_args(&parse(&[
+            "--addr",
+            "127.0.0.1:0",
+            "--body-limit-mib",
+            "2",
+            "--deadline-ms",
+            "150",
+            "--concurrency",
+            "3",
+            "--queue",
+            "5",
+        ]))
+        .unwrap();
+        assert_eq!(c.addr.port(), 0);
+        assert_eq!(c.body_limit_bytes, 2 << 20);
+        assert_eq!(c.deadline, Duration::from_millis(150));
+        assert_eq!((c.max_concurrency, c.max_queue), (3, 5));
+    }
+
+    #[test]
+    fn bad_flags_name_the_flag() {
+        for (flags, field) in [
+            (vec!["--addr", "nowhere"], "--addr"),
+            (vec!["--body-limit-mib", "0"], "--body-limit-mib"),
+            (vec!["--deadline-ms", "0"], "--deadline-ms"),
+            (vec!["--concurrency", "0"], "--max-concurrency"),
+        ] {
+            let e = config_from_args(&parse(&flags)).unwrap_err();
+            assert_eq!(e.field(), Some(field), "{flags:?}");
+        }
+    }
+
+    #[test]
+    fn token_file_is_read_and_validated() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("token");
+        std::fs::write(&path, "abc123\n").unwrap();
+        let t = load_token(Some(&path)).unwrap().unwrap();
+        assert!(t.matches(b"abc123"));
+        std::fs::write(&path, "\n").unwrap();
+        assert_eq!(
+            load_token(Some(&path)).unwrap_err().field(),
+            Some("--token-file")
+        );
+        let missing = dir.path().join("missing");
+        assert!(matches!(
+            load_token(Some(&missing)).unwrap_err(),
+            Error::File { .. }
+        ));
+    }
 }

@@ -1,0 +1,110 @@
+#!/usr/bin/env bash
+# Load benchmark of `dpmp serve` on loopback, bounded in time.
+#
+#   scripts/load.sh                # release build, 10 s per point, 60 s memory run
+#   PROFILE=dev DURATION=5s MEMORY_S=30 scripts/load.sh
+#
+# Measures /v1/optimize on the typical problem (real-like prior, 10-obstacle
+# cluster, 150 samples, 2 cm clearance; `dpmp serve --print-typical-request`)
+# at 1, 8 and 64 concurrent clients with wrk (installed with apt-get when
+# missing), then resident memory (VmRSS) every 5 s over a run at 8 clients.
+# /v1/plan is measured too when a model exists at models/default (needs
+# python3 to build the 640x480 JPEG body). Only loopback is used.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+PROFILE=${PROFILE:-release}
+DURATION=${DURATION:-10s}
+MEMORY_S=${MEMORY_S:-60}
+PORT=${PORT:-18080}
+ADDR="127.0.0.1:${PORT}"
+OUT=${OUT:-target/load}
+mkdir -p "$OUT"
+
+if ! command -v wrk >/dev/null; then
+  echo "installing wrk (apt-get)" >&2
+  apt-get install -y wrk >/dev/null || sudo apt-get install -y wrk >/dev/null
+fi
+
+if [ "$PROFILE" = "release" ]; then
+  cargo build --release --bin dpmp
+  BIN=target/release/dpmp
+else
+  cargo build --bin dpmp
+  BIN=target/debug/dpmp
+fi
+
+"$BIN" serve --print-typical-request 1 > "$OUT/optimize.json"
+cat > "$OUT/post.lua" <<LUA
+local f = io.open("$OUT/body.json", "rb")
+wrk.method = "POST"
+wrk.body = f:read("*a")
+f:close()
+wrk.headers["Content-Type"] = "application/json"
+LUA
+
+"$BIN" serve --addr "$ADDR" --queue 1024 --deadline-ms 5000 2> "$OUT/server.log" &
+SERVER=$!
+trap 'kill -TERM $SERVER 2>/dev/null || true; wait $SERVER 2>/dev/null || true' EXIT
+for _ in $(seq 1 100); do
+  curl -sf "http://$ADDR/healthz" >/dev/null 2>&1 && break
+  sleep 0.1
+done
+
+run_wrk() { # route clients duration
+  local threads=$(( $2 < 2 ? $2 : 2 ))
+  wrk -t "$threads" -c "$2" -d "$3" --latency -s "$OUT/post.lua" "http://$ADDR$1"
+}
+
+summarise() { # route clients < wrk output
+  awk -v route="$1" -v c="$2" '
+    /Requests\/sec/ {rps=$2}
+    /^ +50%/ {p50=$2} /^ +99%/ {p99=$2}
+    /Non-2xx/ {errors=$NF}
+    /Socket errors/ {sock=$0}
+    END {printf "%s clients=%s req/s=%s p50=%s p99=%s non2xx=%s %s\n", route, c, rps, p50, p99, (errors==""?0:errors), sock}'
+}
+
+bench_route() { # route body
+  cp "$2" "$OUT/body.json"
+  run_wrk "$1" 1 2s > /dev/null # warm-up
+  for c in 1 8 64; do
+    run_wrk "$1" "$c" "$DURATION" | tee "$OUT/wrk-$(basename "$1")-$c.txt" | summarise "$1" "$c"
+  done
+}
+
+echo "== $(nproc) cores, profile $PROFILE, $DURATION per point"
+bench_route /v1/optimize "$OUT/optimize.json"
+
+if [ -f models/default/config.json ] && command -v python3 >/dev/null; then
+  python3 - "$OUT/plan.json" <<'PY'
+import base64, json, sys
+# Writing the 640x480 JPEG needs PIL (python3-pil).
+try:
+    from PIL import Image
+    import io, random
+    random.seed(1)
+    img = Image.new("RGB", (640, 480), (40, 120, 40))
+    buf = io.BytesIO(); img.save(buf, format="JPEG", quality=90)
+    data = buf.getvalue()
+except ImportError:
+    sys.exit("python3-pil is needed for the /v1/plan body")
+json.dump({"image_base64": base64.b64encode(data).decode(), "target_box": [300, 200, 340, 250],
+           "mask_applied": False, "clearance_m": 0.02}, open(sys.argv[1], "w"))
+PY
+  bench_route /v1/plan "$OUT/plan.json"
+else
+  echo "/v1/plan skipped: no model at models/default (train one first, see README)"
+fi
+
+echo "== resident memory over ${MEMORY_S} s at 8 clients (/v1/optimize)"
+cp "$OUT/optimize.json" "$OUT/body.json"
+run_wrk /v1/optimize 8 "${MEMORY_S}s" > "$OUT/wrk-memory.txt" &
+WRK=$!
+for t in $(seq 0 5 "$MEMORY_S"); do
+  echo "t=${t}s $(grep VmRSS /proc/$SERVER/status)"
+  sleep 5
+done
+wait $WRK
+summarise /v1/optimize 8 < "$OUT/wrk-memory.txt"
+echo "peak: $(grep VmHWM /proc/$SERVER/status)"

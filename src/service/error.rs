@@ -1,0 +1,243 @@
+//! The one error type of the HTTP layer, [`ApiError`], answered as
+//! `{"error": {"code", "message", "field"}}` with a 4xx (or 503) status.
+//!
+//! | status | codes |
+//! |---|---|
+//! | 400 | `malformed_json`, `malformed_multipart`, `malformed_image`, `malformed_base64` |
+//! | 401 | `unauthorized` |
+//! | 404 | `not_found` |
+//! | 405 | `method_not_allowed` |
+//! | 413 | `body_too_large`, `image_too_large` |
+//! | 415 | `unsupported_media_type`, `unsupported_image_format` |
+//! | 422 | `invalid_input`, `infeasible`, `numerical` |
+//! | 429 | `overloaded` |
+//! | 503 | `deadline_exceeded`, `model_unavailable`, `shutting_down` |
+//! | 500 | `internal` (a bug: a panicking solver task) |
+
+use axum::http::StatusCode;
+use axum::response::{IntoResponse, Response};
+use axum::Json;
+use serde::Serialize;
+
+/// An error answered to an HTTP client.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ApiError {
+    /// HTTP status.
+    pub status: StatusCode,
+    /// Machine-readable code (see the module table).
+    pub code: &'static str,
+    /// Human-readable explanation.
+    pub message: String,
+    /// The offending field as a JSON path (`obstacles[2].radius`), if any.
+    pub field: Option<String>,
+}
+
+/// The JSON body `{"error": {...}}`.
+#[derive(Serialize)]
+struct Body<'a> {
+    error: Detail<'a>,
+}
+
+#[derive(Serialize)]
+struct Detail<'a> {
+    code: &'a str,
+    message: &'a str,
+    field: Option<&'a str>,
+}
+
+impl ApiError {
+    /// A new error without a field.
+    pub fn new(status: StatusCode, code: &'static str, message: impl Into<String>) -> Self {
+        ApiError {
+            status,
+            code,
+            message: message.into(),
+            field: None,
+        }
+    }
+
+    /// Attach the offending field (empty paths are dropped).
+    pub fn with_field(mut self, field: impl Into<String>) -> Self {
+        let field = field.into();
+        self.field = (!field.is_empty() && field != ".").then_some(field);
+        self
+    }
+
+    /// 422 `invalid_input` naming `field`.
+    pub fn invalid(field: impl Into<String>, message: impl Into<String>) -> Self {
+        Self::new(StatusCode::UNPROCESSABLE_ENTITY, "invalid_input", message).with_field(field)
+    }
+
+    /// 400 for a body that is not valid JSON.
+    pub fn malformed_json(message: impl Into<String>) -> Self {
+        Self::new(StatusCode::BAD_REQUEST, "malformed_json", message)
+    }
+
+    /// 413 for a body over the limit.
+    pub fn body_too_large(limit: usize) -> Self {
+        Self::new(
+            StatusCode::PAYLOAD_TOO_LARGE,
+            "body_too_large",
+            format!("the request body exceeds the limit of {limit} bytes"),
+        )
+    }
+
+    /// 415 for a content type the endpoint does not take.
+    pub fn unsupported_media_type(expected: &str) -> Self {
+        Self::new(
+            StatusCode::UNSUPPORTED_MEDIA_TYPE,
+            "unsupported_media_type",
+            format!("expected Content-Type {expected}"),
+        )
+    }
+
+    /// 401 for a missing or wrong bearer token (never echoes the token).
+    pub fn unauthorized() -> Self {
+        Self::new(
+            StatusCode::UNAUTHORIZED,
+            "unauthorized",
+            "a valid `Authorization: Bearer <token>` header is required",
+        )
+    }
+
+    /// 404 for an unknown route.
+    pub fn not_found() -> Self {
+        Self::new(StatusCode::NOT_FOUND, "not_found", "no such route")
+    }
+
+    /// 405 for a known route with another method.
+    pub fn method_not_allowed() -> Self {
+        Self::new(
+            StatusCode::METHOD_NOT_ALLOWED,
+            "method_not_allowed",
+            "this route does not accept that method",
+        )
+    }
+
+    /// 429 when the queue of waiting requests is full.
+    pub fn overloaded() -> Self {
+        Self::new(
+            StatusCode::TOO_MANY_REQUESTS,
+            "overloaded",
+            "too many requests are waiting for a solver; retry later",
+        )
+    }
+
+    /// 503 when the deadline passed before an answer was ready.
+    pub fn deadline_exceeded(message: impl Into<String>) -> Self {
+        Self::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "deadline_exceeded",
+            message,
+        )
+    }
+
+    /// 503 when no network model is loaded.
+    pub fn model_unavailable() -> Self {
+        Self::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "model_unavailable",
+            "no network model is loaded: start `dpmp serve --model DIR` with a trained model \
+             (see the README's training section); /v1/optimize works without one",
+        )
+    }
+
+    /// 500 for a bug (a solver task that panicked).
+    pub fn internal(message: impl Into<String>) -> Self {
+        Self::new(StatusCode::INTERNAL_SERVER_ERROR, "internal", message)
+    }
+}
+
+impl From<crate::Error> for ApiError {
+    fn from(e: crate::Error) -> Self {
+        use crate::Error;
+        let status = match &e {
+            Error::Invalid { .. } | Error::Infeasible(_) | Error::Numerical(_) => {
+                StatusCode::UNPROCESSABLE_ENTITY
+            }
+            Error::Cancelled(_) => StatusCode::SERVICE_UNAVAILABLE,
+            Error::File { .. } => StatusCode::INTERNAL_SERVER_ERROR,
+        };
+        let code = match &e {
+            Error::Cancelled(_) => "deadline_exceeded",
+            Error::File { .. } => "internal",
+            other => other.code(),
+        };
+        let message = match &e {
+            Error::Invalid { message, .. } => message.clone(),
+            other => other.to_string(),
+        };
+        let field = e.field().map(str::to_string).unwrap_or_default();
+        ApiError::new(status, code, message).with_field(field)
+    }
+}
+
+impl IntoResponse for ApiError {
+    fn into_response(self) -> Response {
+        let body = Body {
+            error: Detail {
+                code: self.code,
+                message: &self.message,
+                field: self.field.as_deref(),
+            },
+        };
+        let mut response = (self.status, Json(body)).into_response();
+        if self.status == StatusCode::UNAUTHORIZED {
+            response.headers_mut().insert(
+                axum::http::header::WWW_AUTHENTICATE,
+                axum::http::HeaderValue::from_static("Bearer"),
+            );
+        }
+        response
+    }
+}
+
+impl std::fmt::Display for ApiError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} {}: {}",
+            self.status.as_u16(),
+            self.code,
+            self.message
+        )?;
+        if let Some(field) = &self.field {
+            write!(f, " (field {field})")?;
+        }
+        Ok(())
+    }
+}
+
+impl std::error::Error for ApiError {}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn crate_errors_map_to_4xx_with_field() {
+        let e: ApiError = crate::Error::invalid("obstacles[1].radius", "must be positive").into();
+        assert_eq!(e.status, StatusCode::UNPROCESSABLE_ENTITY);
+        assert_eq!(e.code, "invalid_input");
+        assert_eq!(e.field.as_deref(), Some("obstacles[1].radius"));
+        assert_eq!(e.message, "must be positive");
+        let e: ApiError = crate::Error::Infeasible("start in collision".into()).into();
+        assert_eq!((e.status.as_u16(), e.code), (422, "infeasible"));
+        let e: ApiError = crate::Error::Cancelled("deadline".into()).into();
+        assert_eq!((e.status.as_u16(), e.code), (503, "deadline_exceeded"));
+    }
+
+    #[tokio::test]
+    async fn body_is_the_documented_json_shape() {
+        let response = ApiError::invalid("start[2]", "must be finite").into_response();
+        assert_eq!(response.status(), StatusCode::UNPROCESSABLE_ENTITY);
+        let bytes = axum::body::to_bytes(response.into_body(), 1 << 16)
+            .await
+            .unwrap();
+        let v: serde_json::Value = serde_json::from_slice(&bytes).unwrap();
+        assert_eq!(
+            v,
+            serde_json::json!({"error": {"code": "invalid_input", "message": "must be finite", "field": "start[2]"}})
+        );
+    }
+}

@@ -1,0 +1,201 @@
+//! Typed request extractors with the service's own error mapping (axum's
+//! rejections are never answered as they are):
+//!
+//! - wrong or missing `Content-Type` → 415 `unsupported_media_type`;
+//! - body over the limit → 413 `body_too_large`;
+//! - bytes that are not JSON (syntax, truncation, trailing data, nesting
+//!   deeper than 128, numbers out of range) → 400 `malformed_json`;
+//! - JSON of the wrong shape (unknown field, wrong type, missing field) →
+//!   422 `invalid_input` with the JSON path of the field.
+
+use super::error::ApiError;
+use axum::body::Bytes;
+use axum::extract::{FromRequest, Request};
+use axum::http::header::CONTENT_TYPE;
+use axum::http::{HeaderMap, StatusCode};
+use serde::de::DeserializeOwned;
+
+/// The request media types the service reads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MediaType {
+    /// `application/json` (or any `application/*+json`).
+    Json,
+    /// `multipart/form-data`.
+    Multipart,
+}
+
+/// The media type of a request, or `None` when absent or another type.
+pub fn media_type(headers: &HeaderMap) -> Option<MediaType> {
+    let value = headers.get(CONTENT_TYPE)?.to_str().ok()?;
+    let essence = value.split(';').next()?.trim().to_ascii_lowercase();
+    if essence == "application/json"
+        || (essence.starts_with("application/") && essence.ends_with("+json"))
+    {
+        Some(MediaType::Json)
+    } else if essence == "multipart/form-data" {
+        Some(MediaType::Multipart)
+    } else {
+        None
+    }
+}
+
+/// A JSON body parsed into `T` with the error mapping of this module.
+#[derive(Debug)]
+pub struct ApiJson<T>(pub T);
+
+impl<S, T> FromRequest<S> for ApiJson<T>
+where
+    S: Send + Sync,
+    T: DeserializeOwned,
+{
+    type Rejection = ApiError;
+
+    async fn from_request(request: Request, state: &S) -> Result<Self, Self::Rejection> {
+        if media_type(request.headers()) != Some(MediaType::Json) {
+            return Err(ApiError::unsupported_media_type("application/json"));
+        }
+        let bytes = read_body(request, state).await?;
+        parse_json(&bytes).map(ApiJson)
+    }
+}
+
+/// Buffer the whole body under the configured limit
+/// ([`axum::extract::DefaultBodyLimit`]).
+pub async fn read_body<S: Send + Sync>(request: Request, state: &S) -> Result<Bytes, ApiError> {
+    Bytes::from_request(request, state)
+        .await
+        .map_err(|rejection| {
+            if rejection.status() == StatusCode::PAYLOAD_TOO_LARGE {
+                ApiError::new(
+                    StatusCode::PAYLOAD_TOO_LARGE,
+                    "body_too_large",
+                    rejection.body_text(),
+                )
+            } else {
+                ApiError::new(
+                    StatusCode::BAD_REQUEST,
+                    "malformed_body",
+                    rejection.body_text(),
+                )
+            }
+        })
+}
+
+/// Parse JSON bytes into `T`: syntax errors → 400 `malformed_json`, shape
+/// errors → 422 `invalid_input` naming the JSON path.
+pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
+    let mut de = serde_json::Deserializer::from_slice(bytes);
+    let value = serde_path_to_error::deserialize(&mut de).map_err(path_error)?;
+    de.end().map_err(|e| {
+        ApiError::malformed_json(format!("trailing data after the JSON value: {e}"))
+    })?;
+    Ok(value)
+}
+
+/// Deserialize an already parsed JSON value into `T` (shape errors → 422).
+pub fn from_value<T: DeserializeOwned>(value: serde_json::Value) -> Result<T, ApiError> {
+    serde_path_to_error::deserialize(value).map_err(|e| {
+        let field = e.path().to_string();
+        ApiError::invalid(field, e.inner().to_string())
+    })
+}
+
+fn path_error(e: serde_path_to_error::Error<serde_json::Error>) -> ApiError {
+    use serde_json::error::Category;
+    let field = e.path().to_string();
+    let inner = e.into_inner();
+    match inner.classify() {
+        Category::Data => ApiError::invalid(field, strip_position(&inner)),
+        Category::Syntax | Category::Eof | Category::Io => {
+            ApiError::malformed_json(format!("the body is not valid JSON: {inner}"))
+        }
+    }
+}
+
+/// serde_json's data errors end with " at line L column C"; the field path
+/// says where, so keep the message short.
+fn strip_position(e: &serde_json::Error) -> String {
+    let text = e.to_string();
+    match text.rfind(" at line ") {
+        Some(i) => text[..i].to_string(),
+        None => text,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use axum::http::HeaderValue;
+    use serde::Deserialize;
+
+    #[derive(Debug, Deserialize)]
+    #[serde(deny_unknown_fields)]
+    #[allow(dead_code)]
+    struct Thing {
+        radius: f64,
+        items: Vec<Inner>,
+    }
+
+    #[derive(Debug, Deserialize)]
+    #[allow(dead_code)]
+    struct Inner {
+        id: String,
+    }
+
+    #[test]
+    fn media_types_are_recognised() {
+        let mut h = HeaderMap::new();
+        assert_eq!(media_type(&h), None);
+        for (v, want) in [
+            ("application/json", Some(MediaType::Json)),
+            ("Application/JSON; charset=utf-8", Some(MediaType::Json)),
+            ("application/problem+json", Some(MediaType::Json)),
+            (
+                "multipart/form-data; boundary=x",
+                Some(MediaType::Multipart),
+            ),
+            ("text/plain", None),
+            ("application/jsonx", None),
+        ] {
+            h.insert(CONTENT_TYPE, HeaderValue::from_static(v));
+            assert_eq!(media_type(&h), want, "{v}");
+        }
+    }
+
+    #[test]
+    fn syntax_errors_are_400_and_shape_errors_422_with_path() {
+        for bad in [
+            &b"{"[..],
+            b"",
+            b"{\"radius\": 1,}",
+            b"{\"radius\": 1, \"items\": [",
+            b"{\"radius\": 1, \"items\": []} x",
+            b"\xff\xfe",
+        ] {
+            let e = parse_json::<Thing>(bad).unwrap_err();
+            assert_eq!(
+                (e.status.as_u16(), e.code),
+                (400, "malformed_json"),
+                "{bad:?}"
+            );
+        }
+        let e = parse_json::<Thing>(br#"{"radius": "big", "items": []}"#).unwrap_err();
+        assert_eq!(
+            (e.status.as_u16(), e.field.as_deref()),
+            (422, Some("radius"))
+        );
+        let e = parse_json::<Thing>(br#"{"radius": 1, "items": [{"id": "a"}, {"id": 3}]}"#)
+            .unwrap_err();
+        assert_eq!(e.field.as_deref(), Some("items[1].id"));
+        let e = parse_json::<Thing>(br#"{"radius": 1, "items": [], "extra": 1}"#).unwrap_err();
+        assert_eq!(e.status.as_u16(), 422);
+        assert!(e.message.contains("extra"), "{}", e.message);
+        let deep = "[".repeat(10_000);
+        let e = parse_json::<serde_json::Value>(deep.as_bytes()).unwrap_err();
+        assert_eq!(e.status.as_u16(), 400);
+        let e = parse_json::<Thing>(br#"{"radius": 1e999, "items": []}"#).unwrap_err();
+        assert_eq!(e.status.as_u16(), 400);
+        let ok = parse_json::<Thing>(br#" {"radius": 2.5, "items": [{"id": "a"}]} "#).unwrap();
+        assert_eq!(ok.radius, 2.5);
+    }
+}

@@ -1,0 +1,87 @@
+//! `GET /healthz` (the process answers) and `GET /readyz` (robot and
+//! optional model loaded, not shutting down).
+
+use crate::service::state::AppState;
+use axum::extract::State;
+use axum::http::StatusCode;
+use axum::Json;
+use serde::Serialize;
+
+/// Body of `/healthz`.
+#[derive(Debug, Serialize)]
+pub struct Health {
+    /// Always `"ok"`.
+    pub status: &'static str,
+    /// Crate version.
+    pub version: &'static str,
+}
+
+/// `GET /healthz`.
+pub async fn healthz() -> Json<Health> {
+    Json(Health {
+        status: "ok",
+        version: env!("CARGO_PKG_VERSION"),
+    })
+}
+
+/// Body of `/readyz`.
+#[derive(Debug, Serialize)]
+pub struct Readiness {
+    /// Whether the service takes work (`/v1/optimize` at least).
+    pub ready: bool,
+    /// Whether a graceful shutdown has begun.
+    pub shutting_down: bool,
+    /// The robot (always loaded: the service does not start without it).
+    pub robot: RobotStatus,
+    /// The network model (optional; `/v1/plan` needs it).
+    pub model: ModelStatus,
+}
+
+/// Robot part of `/readyz`.
+#[derive(Debug, Serialize)]
+pub struct RobotStatus {
+    /// Always true.
+    pub loaded: bool,
+    /// Robot name.
+    pub name: String,
+    /// Number of actuated joints.
+    pub dof: usize,
+}
+
+/// Model part of `/readyz`.
+#[derive(Debug, Serialize)]
+pub struct ModelStatus {
+    /// Whether a model is loaded.
+    pub loaded: bool,
+    /// Its name.
+    pub name: Option<String>,
+}
+
+/// `GET /readyz`: 200 when ready, 503 with the same body otherwise.
+pub async fn readyz(State(state): State<AppState>) -> (StatusCode, Json<Readiness>) {
+    let shutting_down = state.is_shutting_down();
+    let robot = state.robot();
+    let model = state.model();
+    let ready = !shutting_down;
+    let status = if ready {
+        StatusCode::OK
+    } else {
+        StatusCode::SERVICE_UNAVAILABLE
+    };
+    (
+        status,
+        Json(Readiness {
+            ready,
+            shutting_down,
+            robot: RobotStatus {
+                loaded: true,
+                name: robot.name().to_string(),
+                dof: robot.dof(),
+            },
+            model: ModelStatus {
+                loaded: model.is_some(),
+                name: model.map(|m| m.name().to_string()),
+            },
+        }),
+    )
+}

@@ -1,0 +1,80 @@
+//! `POST /v1/optimize`: the optimise request/response of DESIGN.md, solved
+//! on the blocking pool under the concurrency limit and the deadline.
+
+use crate::optim::{optimize_with, OptimizeRequest, OptimizeResponse, SolveControl, Status};
+use crate::service::config::ServiceConfig;
+use crate::service::error::ApiError;
+use crate::service::extract::ApiJson;
+use crate::service::limits::Job;
+use crate::service::state::AppState;
+use axum::extract::State;
+use axum::Json;
+use std::time::Instant;
+
+/// `POST /v1/optimize`.
+pub async fn optimize(
+    State(state): State<AppState>,
+    ApiJson(request): ApiJson<OptimizeRequest>,
+) -> Result<Json<OptimizeResponse>, ApiError> {
+    check_request_limits(state.config(), &request)?;
+    let robot = state.robot();
+    let deadline = Instant::now() + state.config().deadline;
+    let response = state
+        .limiter()
+        .run(deadline, move |job| {
+            optimize_with(&request, &robot, &solve_control(job))
+        })
+        .await??;
+    record_solve(&state, &response);
+    Ok(Json(response))
+}
+
+/// The solver's view of a limiter job.
+pub fn solve_control(job: &Job) -> SolveControl {
+    SolveControl {
+        deadline: Some(job.deadline),
+        cancel: Some(job.cancel.clone()),
+    }
+}
+
+/// The service's own request limits (on top of the optimiser's sanity
+/// limits): obstacle count, extra samples, trajectory samples → 422.
+pub fn check_request_limits(
+    config: &ServiceConfig,
+    request: &OptimizeRequest,
+) -> Result<(), ApiError> {
+    let checks = [
+        ("obstacles", request.obstacles.len(), config.max_obstacles),
+        ("samples", request.samples, config.max_samples),
+        (
+            "promp.n_samples",
+            request.promp.n_samples,
+            config.max_trajectory_samples,
+        ),
+    ];
+    for (field, value, limit) in checks {
+        if value > limit {
+            return Err(ApiError::invalid(
+                field,
+                format!("at most {limit} allowed by this service, got {value}"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The JSON name of a status (`optimal`, `infeasible`, `max_iterations`).
+pub fn status_name(status: Status) -> &'static str {
+    match status {
+        Status::Optimal => "optimal",
+        Status::Infeasible => "infeasible",
+        Status::MaxIterations => "max_iterations",
+    }
+}
+
+/// Count a finished solve in the metrics.
+pub fn record_solve(state: &AppState, response: &OptimizeResponse) {
+    state
+        .metrics()
+        .record_solve(status_name(response.status), response.report.iterations);
+}

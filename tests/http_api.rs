@@ -1,0 +1,286 @@
+//! Endpoints over a real socket: happy paths with numeric checks and every
+//! error class (400, 401, 404, 405, 413, 415, 422, 503).
+
+mod http_support;
+
+use dpmp::service::auth::Token;
+use http_support::*;
+use serde_json::{json, Value};
+
+#[test]
+fn health_ready_and_metrics_answer() {
+    let server = start(test_config());
+    let c = client();
+    let (s, body) = status_and_json(c.get(server.url("/healthz")).send().unwrap());
+    assert_eq!((s, body["status"].as_str()), (200, Some("ok")));
+    let (s, body) = status_and_json(c.get(server.url("/readyz")).send().unwrap());
+    assert_eq!(s, 200);
+    assert_eq!(body["ready"], json!(true));
+    assert_eq!(body["shutting_down"], json!(false));
+
+    let text = c
+        .get(server.url("/metrics"))
+        .send()
+        .unwrap()
+        .text()
+        .unwrap();
+    // The two requests above were counted by route template and status.
+    assert!(
+        text.contains(
+            "dpmp_http_requests_total{route=\"/healthz\",method=\"GET\",status=\"200\"} 1"
+        ),
+        "{text}"
+    );
+    assert!(
+        text.contains(
+            "dpmp_http_requests_total{route=\"/readyz\",method=\"GET\",status=\"200\"} 1"
+        ),
+        "{text}"
+    );
+    assert!(text.contains("# TYPE dpmp_http_request_duration_seconds histogram"));
+}
+
+#[test]
+fn unknown_routes_and_methods_answer_json_404_405() {
+    let server = start(test_config());
+    let c = client();
+    let (s, body) = status_and_json(c.get(server.url("/nope")).send().unwrap());
+    assert_eq!((s, code(&body)), (404, "not_found"));
+    let (s, body) = status_and_json(c.delete(server.url("/healthz")).send().unwrap());
+    assert_eq!((s, code(&body)), (405, "method_not_allowed"));
+}
+
+#[test]
+fn token_guards_everything_but_probes() {
+    let config = test_config().with_token(Token::new("test", "t0ken-123").unwrap());
+    let server = start(config);
+    let c = client();
+    let (s, body) = status_and_json(c.get(server.url("/metrics")).send().unwrap());
+    assert_eq!((s, code(&body)), (401, "unauthorized"));
+    assert!(!body.to_string().contains("t0ken-123"));
+    let wrong = c
+        .get(server.url("/metrics"))
+        .bearer_auth("t0ken-124")
+        .send()
+        .unwrap();
+    assert_eq!(wrong.status().as_u16(), 401);
+    assert_eq!(wrong.headers()["www-authenticate"], "Bearer");
+    let right = c
+        .get(server.url("/metrics"))
+        .bearer_auth("t0ken-123")
+        .send()
+        .unwrap();
+    assert_eq!(right.status().as_u16(), 200);
+    assert!(right.headers()["content-type"]
+        .to_str()
+        .unwrap()
+        .starts_with("text/plain"));
+    assert_eq!(
+        c.get(server.url("/healthz"))
+            .send()
+            .unwrap()
+            .status()
+            .as_u16(),
+        200
+    );
+    assert_eq!(
+        c.get(server.url("/readyz"))
+            .send()
+            .unwrap()
+            .status()
+            .as_u16(),
+        200
+    );
+    let _unused: Option<Value> = None;
+}
+
+/// The typical request (real-like prior, 10 obstacles, 150 samples, 2 cm).
+fn typical_request(seed: u64) -> Value {
+    let robot = dpmp::robot::Robot::panda().unwrap();
+    let settings = dpmp::optim::example::ExampleSettings::default();
+    let request = dpmp::optim::example::typical_request(&robot, seed, &settings).unwrap();
+    serde_json::to_value(request).unwrap()
+}
+
+#[test]
+fn optimize_answers_a_verified_trajectory() {
+    let server = start(test_config());
+    let c = client();
+    let request = typical_request(1);
+    let (s, body) = post_json(&c, &server.url("/v1/optimize"), request.to_string());
+    assert_eq!(s, 200, "{body}");
+    let robot = dpmp::robot::Robot::panda().unwrap();
+    let trajectory = &body["trajectory"];
+    assert_eq!(
+        trajectory["joint_names"],
+        serde_json::to_value(robot.joint_names()).unwrap()
+    );
+    let points = trajectory["points"].as_array().unwrap();
+    assert_eq!(points.len(), 150);
+    assert_eq!(points[0]["positions"].as_array().unwrap().len(), 7);
+    let t_end = points.last().unwrap()["time_from_start"].as_f64().unwrap();
+    assert!((t_end - 4.0).abs() < 1e-9, "{t_end}");
+    assert_eq!(body["weights"].as_array().unwrap().len(), 56);
+    let report = &body["report"];
+    if body["status"] == "optimal" {
+        let clearance = report["min_clearance_m"].as_f64().unwrap();
+        assert!(clearance >= 0.02 - 1e-6, "clearance {clearance}");
+        assert!(report["max_joint_limit_violation_rad"].as_f64().unwrap() <= 1e-6);
+        assert!(report["max_velocity_ratio"].as_f64().unwrap() <= 1.0 + 1e-6);
+    } else {
+        assert!(body["reason"].is_string(), "{body}");
+    }
+    assert!(body["mahalanobis"].as_f64().unwrap() >= 0.0);
+    // The solve was counted in the metrics.
+    let text = c
+        .get(server.url("/metrics"))
+        .send()
+        .unwrap()
+        .text()
+        .unwrap();
+    assert!(text.contains("dpmp_solver_iterations_count 1"), "{text}");
+}
+
+#[test]
+fn robot_and_models_describe_what_is_loaded() {
+    let server = start(test_config());
+    let c = client();
+    let (s, body) = status_and_json(c.get(server.url("/v1/robot")).send().unwrap());
+    assert_eq!(s, 200);
+    assert_eq!(body["dof"], json!(7));
+    let names = body["joint_names"].as_array().unwrap();
+    assert_eq!(names.len(), 7);
+    assert_eq!(names[0], json!("panda_joint1"));
+    let joints = body["joints"].as_array().unwrap();
+    // Panda joint 4 limits from the datasheet: [-3.0718, -0.0698].
+    assert!((joints[3]["lower"].as_f64().unwrap() + 3.0718).abs() < 1e-3);
+    assert!((joints[3]["upper"].as_f64().unwrap() + 0.0698).abs() < 1e-3);
+    let home = body["home"].as_array().unwrap();
+    assert!((home[3].as_f64().unwrap() + 2.5334).abs() < 1e-9);
+    assert!(!body["collision_shapes"].as_array().unwrap().is_empty());
+    let (s, body) = status_and_json(c.get(server.url("/v1/models")).send().unwrap());
+    assert_eq!((s, body), (200, json!({"models": []})));
+    let (_, ready) = status_and_json(c.get(server.url("/readyz")).send().unwrap());
+    assert_eq!(ready["robot"]["dof"], json!(7));
+    assert_eq!(ready["model"]["loaded"], json!(false));
+}
+
+#[test]
+fn bad_requests_get_the_documented_4xx() {
+    let config = test_config().with_body_limit(64 * 1024);
+    let server = start(config);
+    let c = client();
+    let url = server.url("/v1/optimize");
+    // 415: wrong or missing content type.
+    let r = c.post(&url).body("{}").send().unwrap();
+    let (s, body) = status_and_json(r);
+    assert_eq!((s, code(&body)), (415, "unsupported_media_type"));
+    let r = c
+        .post(&url)
+        .header("content-type", "text/plain")
+        .body("{}")
+        .send()
+        .unwrap();
+    assert_eq!(r.status().as_u16(), 415);
+    // 400: malformed JSON.
+    let (s, body) = post_json(&c, &url, "{\"prior\": ");
+    assert_eq!((s, code(&body)), (400, "malformed_json"));
+    // 413: body over the limit.
+    let big = format!("{{\"pad\": \"{}\"}}", "x".repeat(100 * 1024));
+    let (s, body) = post_json(&c, &url, big);
+    assert_eq!((s, code(&body)), (413, "body_too_large"));
+    // 422: wrong shapes and broken rules, naming the field.
+    let mut request = typical_request(2);
+    request["obstacles"][1]["radius"] = json!(-0.01);
+    let (s, body) = post_json(&c, &url, request.to_string());
+    assert_eq!((s, code(&body)), (422, "invalid_input"), "{body}");
+    assert!(field(&body).unwrap().starts_with("obstacles[1]"), "{body}");
+    let mut request = typical_request(2);
+    request["start"] = json!([0.0, 1.0]);
+    let (s, body) = post_json(&c, &url, request.to_string());
+    assert_eq!((s, field(&body)), (422, Some("start")), "{body}");
+    let mut request = typical_request(2);
+    request["clearance_m"] = json!("NaN");
+    let (s, body) = post_json(&c, &url, request.to_string());
+    assert_eq!((s, field(&body)), (422, Some("clearance_m")), "{body}");
+    let mut request = typical_request(2);
+    request["samples"] = json!(1000);
+    let (s, body) = post_json(&c, &url, request.to_string());
+    assert_eq!((s, field(&body)), (422, Some("samples")), "{body}");
+    let (s, body) = post_json(
+        &c,
+        &url,
+        json!({"prior": {"mean": [1.0], "cov": [[1.0]]}, "bogus": 1}).to_string(),
+    );
+    assert_eq!(s, 422, "{body}");
+}
+
+#[test]
+fn plan_validates_and_answers_503_without_a_model() {
+    use base64::Engine as _;
+    let server = start(test_config().with_body_limit(4 << 20));
+    let c = client();
+    let url = server.url("/v1/plan");
+    let mut png = Vec::new();
+    image::DynamicImage::new_rgb8(64, 48)
+        .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .unwrap();
+    let b64 = base64::engine::general_purpose::STANDARD.encode(&png);
+    let valid = json!({"image_base64": b64, "target_box": [10, 10, 20, 20], "clearance_m": 0.02});
+    let (s, body) = post_json(&c, &url, valid.to_string());
+    assert_eq!((s, code(&body)), (503, "model_unavailable"), "{body}");
+    // Multipart with the same content reaches the same point.
+    let form = reqwest::blocking::multipart::Form::new()
+        .part(
+            "image",
+            reqwest::blocking::multipart::Part::bytes(png.clone()).file_name("x.png"),
+        )
+        .text(
+            "request",
+            json!({"target_box": [10, 10, 20, 20]}).to_string(),
+        );
+    let (s, body) = status_and_json(c.post(&url).multipart(form).send().unwrap());
+    assert_eq!((s, code(&body)), (503, "model_unavailable"), "{body}");
+    for (patch, status, fld) in [
+        (json!({"image_base64": "@@@"}), 400, Some("image_base64")),
+        (
+            json!({"target_box": [10, 10, 5, 20]}),
+            422,
+            Some("target_box"),
+        ),
+        (
+            json!({"target_box": [10, 10, 65, 20]}),
+            422,
+            Some("target_box"),
+        ),
+        (json!({"mask_applied": "yes"}), 422, Some("mask_applied")),
+        (
+            json!({"prior": {"mean": [], "cov": []}}),
+            422,
+            Some("prior"),
+        ),
+        (
+            json!({"obstacles": [{"id": "a", "type": "sphere", "center": [0, 0], "radius": 0.1}]}),
+            422,
+            None,
+        ),
+        (
+            json!({"image_base64": base64::engine::general_purpose::STANDARD.encode(b"GIF89a.....")}),
+            415,
+            Some("image_base64"),
+        ),
+    ] {
+        let mut request = valid.clone();
+        for (k, v) in patch.as_object().unwrap() {
+            request[k] = v.clone();
+        }
+        let (s, body) = post_json(&c, &url, request.to_string());
+        assert_eq!(s, status, "{patch} -> {body}");
+        if fld.is_some() {
+            assert_eq!(field(&body), fld, "{patch} -> {body}");
+        }
+    }
+    let form = reqwest::blocking::multipart::Form::new().text("request", "{}");
+    let (s, body) = status_and_json(c.post(&url).multipart(form).send().unwrap());
+    assert_eq!((s, code(&body)), (400, "malformed_multipart"));
+}

@@ -1,0 +1,132 @@
+//! The contract: the router's routes and `api/openapi.yaml`'s paths are the
+//! same set, every documented error code is one the service can answer, and
+//! real responses validate against the spec's schemas.
+
+mod http_support;
+
+use dpmp::service::routes;
+use http_support::schema::validate;
+use http_support::*;
+use serde_json::{json, Value};
+use std::collections::BTreeSet;
+
+fn spec_operations(spec: &Value) -> BTreeSet<(String, String)> {
+    let mut out = BTreeSet::new();
+    for (path, item) in spec["paths"].as_object().unwrap() {
+        for method in item.as_object().unwrap().keys() {
+            out.insert((method.to_uppercase(), path.clone()));
+        }
+    }
+    out
+}
+
+#[test]
+fn router_routes_equal_spec_paths() {
+    let spec = openapi();
+    let router: BTreeSet<(String, String)> = routes::specs()
+        .into_iter()
+        .map(|r| (r.method.to_string(), r.path.to_string()))
+        .collect();
+    assert_eq!(router, spec_operations(&spec));
+    // Every route the table lists is really served (not 404/405).
+    let server = start(test_config());
+    let c = client();
+    for (method, path) in &router {
+        let request = match method.as_str() {
+            "GET" => c.get(server.url(path)),
+            _ => c
+                .post(server.url(path))
+                .header("content-type", "application/json")
+                .body("{}"),
+        };
+        let status = request.send().unwrap().status().as_u16();
+        assert!(status != 404 && status != 405, "{method} {path}: {status}");
+    }
+}
+
+/// The schema of `status`'s JSON answer of `METHOD path` in the spec.
+fn response_schema<'a>(spec: &'a Value, method: &str, path: &str, status: u16) -> &'a Value {
+    let op = &spec["paths"][path][method];
+    let mut response = &op["responses"][status.to_string()];
+    if let Some(r) = response.get("$ref") {
+        let pointer = r.as_str().unwrap().trim_start_matches('#');
+        response = spec.pointer(pointer).unwrap();
+    }
+    &response["content"]["application/json"]["schema"]
+}
+
+fn assert_valid(spec: &Value, method: &str, path: &str, status: u16, body: &Value) {
+    let schema = response_schema(spec, method, path, status);
+    assert!(
+        !schema.is_null(),
+        "{method} {path} {status} is not documented"
+    );
+    let errors = validate(spec, schema, body);
+    assert!(errors.is_empty(), "{method} {path} {status}: {errors:#?}");
+}
+
+#[test]
+fn real_responses_validate_against_the_spec() {
+    let spec = openapi();
+    let server = start(test_config());
+    let c = client();
+    for path in ["/healthz", "/readyz", "/v1/robot", "/v1/models"] {
+        let (s, body) = status_and_json(c.get(server.url(path)).send().unwrap());
+        assert_valid(&spec, "get", path, s, &body);
+    }
+    let robot = dpmp::robot::Robot::panda().unwrap();
+    let settings = dpmp::optim::example::ExampleSettings::default();
+    let request =
+        serde_json::to_value(dpmp::optim::example::typical_request(&robot, 1, &settings).unwrap())
+            .unwrap();
+    let url = server.url("/v1/optimize");
+    let (s, body) = post_json(&c, &url, request.to_string());
+    assert_eq!(s, 200, "{body}");
+    assert_valid(&spec, "post", "/v1/optimize", s, &body);
+    // The request itself validates against the request schema.
+    let request_schema = &spec["paths"]["/v1/optimize"]["post"]["requestBody"]["content"]
+        ["application/json"]["schema"];
+    assert_eq!(
+        validate(&spec, request_schema, &request),
+        Vec::<String>::new()
+    );
+    // Error answers of every class validate too.
+    for (body, status) in [
+        ("{", 400),
+        (
+            "{\"prior\": {\"mean\": [1], \"cov\": [[1]]}, \"clearance_m\": \"x\"}",
+            422,
+        ),
+    ] {
+        let (s, answer) = post_json(&c, &url, body);
+        assert_eq!(s, status);
+        assert_valid(&spec, "post", "/v1/optimize", s, &answer);
+    }
+    let (s, answer) = status_and_json(c.post(&url).body("{}").send().unwrap());
+    assert_valid(&spec, "post", "/v1/optimize", s, &answer);
+    let (s, answer) = post_json(
+        &c,
+        &server.url("/v1/plan"),
+        "{\"target_box\": [1, 2, 3, 4]}",
+    );
+    assert_valid(&spec, "post", "/v1/plan", s, &answer);
+}
+
+#[test]
+fn documented_examples_validate() {
+    let spec = openapi();
+    for (path, media) in [
+        ("/v1/optimize", "application/json"),
+        ("/v1/plan", "application/json"),
+    ] {
+        let content = &spec["paths"][path]["post"]["requestBody"]["content"][media];
+        for (name, example) in content["examples"].as_object().unwrap() {
+            let errors = validate(&spec, &content["schema"], &example["value"]);
+            assert!(errors.is_empty(), "{path} example {name}: {errors:#?}");
+        }
+    }
+    // The optimize example is accepted by the real request type.
+    let example = &spec["paths"]["/v1/optimize"]["post"]["requestBody"]["content"]
+        ["application/json"]["examples"]["annotation_prior"]["value"];
+    let _: dpmp::optim::OptimizeRequest = serde_json::from_value(example.clone()).unwrap();
+}

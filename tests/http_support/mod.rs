@@ -1,0 +1,76 @@
+//! Shared helpers of the HTTP integration tests: a server on an ephemeral
+//! loopback port, a blocking client, and a small JSON-schema validator for
+//! the subset of OpenAPI 3.1 that `api/openapi.yaml` uses.
+
+#![allow(dead_code)]
+
+pub mod schema;
+
+use dpmp::service::{AppState, RunningServer, ServiceConfig};
+use serde_json::Value;
+use std::time::Duration;
+
+/// A config listening on an ephemeral loopback port, with a deadline long
+/// enough for debug builds on a loaded 2-core machine.
+pub fn test_config() -> ServiceConfig {
+    ServiceConfig::default()
+        .with_addr("127.0.0.1:0".parse().unwrap())
+        .with_deadline(Duration::from_secs(60))
+}
+
+/// Start a server with `config` (and the shipped robot, no model).
+pub fn start(config: ServiceConfig) -> RunningServer {
+    let robot = dpmp::robot::Robot::panda().unwrap();
+    RunningServer::start(AppState::new(config, robot, None).unwrap()).unwrap()
+}
+
+/// A blocking client with a generous timeout (tests must not hang).
+pub fn client() -> reqwest::blocking::Client {
+    reqwest::blocking::Client::builder()
+        .timeout(Duration::from_secs(120))
+        .build()
+        .unwrap()
+}
+
+/// POST `body` as JSON text; returns (status, parsed JSON body).
+pub fn post_json(
+    client: &reqwest::blocking::Client,
+    url: &str,
+    body: impl Into<reqwest::blocking::Body>,
+) -> (u16, Value) {
+    let response = client
+        .post(url)
+        .header("content-type", "application/json")
+        .body(body)
+        .send()
+        .unwrap();
+    status_and_json(response)
+}
+
+/// Status and JSON body of a response (panics with the text when the body
+/// is not JSON: every answer of the service must be JSON).
+pub fn status_and_json(response: reqwest::blocking::Response) -> (u16, Value) {
+    let status = response.status().as_u16();
+    let text = response.text().unwrap();
+    let value = serde_json::from_str(&text)
+        .unwrap_or_else(|e| panic!("status {status}: body is not JSON ({e}): {text:?}"));
+    (status, value)
+}
+
+/// The error code of an error body.
+pub fn code(body: &Value) -> &str {
+    body["error"]["code"].as_str().unwrap_or("<no code>")
+}
+
+/// The error field of an error body.
+pub fn field(body: &Value) -> Option<&str> {
+    body["error"]["field"].as_str()
+}
+
+/// The OpenAPI document as JSON.
+pub fn openapi() -> Value {
+    let text =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/api/openapi.yaml")).unwrap();
+    let yaml: serde_yaml::Value = serde_yaml::from_str(&text).unwrap();
+    serde_json::to_value(yaml).unwrap()
+}
