@@ -7,7 +7,7 @@ mod http_support;
 use dpmp::service::routes;
 use http_support::schema::validate;
 use http_support::*;
-use serde_json::{json, Value};
+use serde_json::Value;
 use std::collections::BTreeSet;
 
 fn spec_operations(spec: &Value) -> BTreeSet<(String, String)> {

@@ -1,13 +1,75 @@
-//! `dpmp plan` (being built).
+//! `dpmp plan`: an image and a target box → the network's prior → the
+//! optimiser; prints the `/v1/plan` response JSON.
+
+use crate::net::Model;
+use crate::optim::OptimizeRequest;
+use crate::robot::Robot;
+use crate::service::routes::plan::{predict_and_optimize, PlanInput};
+use crate::{Error, Result};
+use clap::Args;
+use std::path::PathBuf;
+use std::sync::Arc;
 
 /// Arguments of `dpmp plan`.
-#[derive(Debug, clap::Args)]
-pub struct PlanArgs {}
+#[derive(Debug, Args)]
+pub struct PlanArgs {
+    /// Camera image (PNG or JPEG, any size).
+    #[arg(long)]
+    pub image: PathBuf,
+    /// Target berry box in image pixels: x1,y1,x2,y2.
+    #[arg(long = "box", value_delimiter = ',', required = true, allow_negative_numbers = true)]
+    pub target_box: Vec<f64>,
+    /// The image already has the target painted as a white box.
+    #[arg(long)]
+    pub mask_applied: bool,
+    /// Scene file `{"obstacles": [...]}` (request schema).
+    #[arg(long)]
+    pub scene: Option<PathBuf>,
+    /// Trained model folder (model.safetensors + config.json).
+    #[arg(long, default_value = "models/default")]
+    pub model: PathBuf,
+    /// Required clearance to every obstacle (m).
+    #[arg(long, default_value_t = 0.02)]
+    pub clearance: f64,
+    /// Trajectory duration (s).
+    #[arg(long, default_value_t = 4.0)]
+    pub duration: f64,
+}
 
 /// Run `dpmp plan`.
-pub fn run(_args: PlanArgs) -> crate::Result<()> {
-    Err(crate::Error::invalid(
-        "command",
-        "`dpmp plan` is not available in this build yet",
-    ))
+pub fn run(args: PlanArgs) -> Result<()> {
+    let target_box: [f64; 4] = args
+        .target_box
+        .clone()
+        .try_into()
+        .map_err(|_| Error::invalid("--box", "expected four numbers x1,y1,x2,y2"))?;
+    let image = image::open(&args.image)
+        .map_err(|e| Error::file(&args.image, format!("cannot read image: {e}")))?;
+    let obstacles = match &args.scene {
+        Some(path) => crate::cli::read_json::<crate::scene::SceneFile>(path)?.obstacles,
+        None => Vec::new(),
+    };
+    let request: OptimizeRequest = serde_json::from_value(serde_json::json!({
+        "prior": {"mean": [], "cov": []},
+        "duration_s": args.duration,
+        "clearance_m": args.clearance,
+        "obstacles": obstacles,
+    }))
+    .map_err(|e| Error::invalid("--scene", e.to_string()))?;
+    if !args.model.join("config.json").is_file() {
+        return Err(Error::file(
+            &args.model,
+            "no trained model here (config.json missing): train one with `dpmp train` (see the README), or pass --model",
+        ));
+    }
+    let model = Arc::new(Model::load(&args.model)?);
+    let robot = Arc::new(Robot::panda()?);
+    let input = PlanInput {
+        image,
+        target_box,
+        mask_applied: args.mask_applied,
+        request,
+    };
+    let response = predict_and_optimize(&model, &robot, input, &Default::default())?;
+    crate::cli::print_json(&response)
 }

@@ -98,8 +98,9 @@ pub async fn plan(
     Ok(Json(response))
 }
 
-/// The blocking part: network prior, then the optimiser.
-fn predict_and_optimize(
+/// The blocking part: network prior, then the optimiser (also used by
+/// `dpmp plan`).
+pub fn predict_and_optimize(
     model: &Arc<Model>,
     robot: &Arc<Robot>,
     input: PlanInput,
