@@ -328,7 +328,7 @@ impl Problem {
                 }
             } else {
                 stats.rejected_steps += 1;
-                radius *= 0.25;
+                radius = (0.25 * radius).min(0.5 * step);
                 if radius < MIN_TRUST_REGION {
                     if !screen_time {
                         converged = true;
