@@ -16,6 +16,12 @@ use nalgebra::DVector;
 /// Row screening margin (rad or rad/s) when there is no trust region.
 pub const SCREEN_MARGIN: f64 = 0.05;
 
+/// Largest slack (rad) of a position row sent by [`LinearSet::screen_banded`].
+pub const SCREEN_BAND_POSITION: f64 = 0.2;
+/// Largest slack of a velocity row sent by [`LinearSet::screen_banded`], as a
+/// fraction of the velocity limit.
+pub const SCREEN_BAND_VELOCITY: f64 = 0.2;
+
 /// Which bound a row expresses.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum RowKind {
@@ -120,6 +126,32 @@ impl LinearSet {
         Self::all_rows(rows)
             .filter(|&r| {
                 let reach = radius.map_or(SCREEN_MARGIN, |d| d * Self::row_l1(rows, r) + 1e-9);
+                self.excess(rows, w, r) + reach >= 0.0
+            })
+            .collect()
+    }
+
+    /// Like [`LinearSet::screen`], but a row also needs its slack within a
+    /// fixed band ([`SCREEN_BAND_POSITION`] rad, [`SCREEN_BAND_VELOCITY`] of
+    /// the velocity limit): rows far from their bound rarely become active
+    /// in one step, and the caller adds any row a solution violates.
+    pub fn screen_banded(
+        &self,
+        rows: &PhaseRows,
+        w: &DVector<f64>,
+        radius: Option<f64>,
+    ) -> Vec<RowRef> {
+        Self::all_rows(rows)
+            .filter(|&r| {
+                let band = match r.kind {
+                    RowKind::PositionUpper | RowKind::PositionLower => SCREEN_BAND_POSITION,
+                    RowKind::VelocityUpper | RowKind::VelocityLower => {
+                        SCREEN_BAND_VELOCITY * self.velocity[r.joint]
+                    }
+                };
+                let reach = radius
+                    .map_or(SCREEN_MARGIN, |d| d * Self::row_l1(rows, r) + 1e-9)
+                    .min(band);
                 self.excess(rows, w, r) + reach >= 0.0
             })
             .collect()

@@ -40,6 +40,9 @@ pub const MIN_TRUST_REGION: f64 = 1e-4;
 const LINEAR_TOLERANCE: f64 = 1e-7;
 /// Robot shapes linearised per obstacle and phase (the closest ones).
 const SHAPES_PER_OBSTACLE: usize = 2;
+/// Of a run of phases where a pair is short of the clearance target, every
+/// this-many-th phase gets a QP row (besides the local minima).
+const VIOLATION_STRIDE: usize = 3;
 /// Most phases added per dense verification round.
 const MAX_ADDED_PER_ROUND: usize = 64;
 
@@ -174,6 +177,11 @@ impl Problem {
         let mut radius = self.options.trust_region;
         let mut eval = self.evaluate_grid(&rows, centre.clone(), centre);
         let mut converged = true;
+        // Temporal screening of clearance rows; switched off for good when
+        // the trust region collapses with it on, so that a stall (and so a
+        // penalty increase or an `infeasible` verdict) is only declared on
+        // the full set of clearance rows.
+        let mut screen_time = true;
         loop {
             if converged && eval.feasible() {
                 let v = self.verify(&eval.w);
@@ -235,7 +243,15 @@ impl Problem {
                 ));
             }
             let trust = eval.linear_ok.then_some(radius);
-            let (sol, model_here) = match self.subproblem(&rows, &eval, centre, rho, trust, ctl) {
+            let (sol, model_here) = match self.subproblem(
+                &rows,
+                &eval,
+                centre,
+                rho,
+                trust,
+                screen_time,
+                ctl,
+            ) {
                 Ok(x) => x,
                 Err(QpFailure::Infeasible) => {
                     let reason = "joint position limits (minus the margin), velocity limits and the start / final configuration cannot all hold".to_string();
@@ -312,9 +328,12 @@ impl Problem {
                 }
             } else {
                 stats.rejected_steps += 1;
-                radius *= 0.25;
+                radius = (0.25 * radius).min(0.5 * step);
                 if radius < MIN_TRUST_REGION {
-                    converged = true;
+                    if !screen_time {
+                        converged = true;
+                    }
+                    screen_time = false;
                     radius = self.options.trust_region;
                 }
             }
@@ -418,6 +437,7 @@ impl Problem {
 
     /// Build and solve the QP at `eval`; returns the solution and the
     /// model's value at the current iterate.
+    #[allow(clippy::too_many_arguments)]
     fn subproblem(
         &self,
         rows: &PhaseRows,
@@ -425,13 +445,14 @@ impl Problem {
         centre: &DVector<f64>,
         rho: f64,
         trust: Option<f64>,
+        screen_time: bool,
         ctl: &SolveControl,
     ) -> std::result::Result<(super::qp::QpSolution, f64), QpFailure> {
         let mean = &self.prior.mean;
         let mut qp = Qp::new(self.whitening.dim());
         qp.center = centre.clone();
         qp.equalities = self.linear.equalities(&self.ends, mean);
-        let mut included = self.linear.screen(rows, &eval.w, trust);
+        let mut included = self.linear.screen_banded(rows, &eval.w, trust);
         qp.inequalities = included
             .iter()
             .map(|&r| self.linear.inequality(rows, mean, r))
@@ -443,9 +464,23 @@ impl Problem {
         ));
         let target = self.clearance_m + CLEARANCE_BUFFER_M;
         let mut model_slack = 0.0;
-        for pp in &eval.pairs {
+        let keep: Vec<Vec<bool>> = if screen_time {
+            screen_in_time(&eval.pairs, target)
+        } else {
+            eval.pairs
+                .iter()
+                .map(|pp| vec![true; pp.list.len()])
+                .collect()
+        };
+        for (k, pp) in eval.pairs.iter().enumerate() {
+            if !keep[k].iter().any(|&x| x) {
+                continue;
+            }
             let jac = rows.position_jacobian(pp.phase);
-            for c in &pp.list {
+            for (i, c) in pp.list.iter().enumerate() {
+                if !keep[k][i] {
+                    continue;
+                }
                 let g = self
                     .scene
                     .clearance_gradient(&self.robot, &pp.q, &pp.frames, c);
@@ -481,8 +516,9 @@ impl Problem {
         };
         let model_here = eval.cost + rho * model_slack;
         let mut sol = qp.solve(&settings)?;
-        // Row generation: add any grid row the solution violates.
-        for _ in 0..8 {
+        // Row generation: add any grid row the solution violates (each
+        // round adds at least one of finitely many rows, so this ends).
+        loop {
             let w = self.whitening.weights(&sol.z);
             let missing: Vec<_> = self
                 .linear
@@ -576,6 +612,64 @@ impl Problem {
             stats,
         }
     }
+}
+
+/// One phase of a (shape, obstacle) pair: phase value, index into the
+/// pairs, index into that phase's list, distance.
+type PairEntry = (f64, usize, usize, f64);
+
+/// Which clearance rows of `pairs` enter the QP. Clearance is smooth in
+/// time, so per (robot shape, obstacle) pair only the phases where its
+/// distance is a local minimum over the optimisation phases are kept, plus
+/// every [`VIOLATION_STRIDE`]-th phase of each run where the pair is short
+/// of `target`. The merit still counts every phase, and dense verification
+/// still checks everything, so this only changes which rows steer the step.
+fn screen_in_time(pairs: &[PhasePairs], target: f64) -> Vec<Vec<bool>> {
+    let mut keep: Vec<Vec<bool>> = pairs.iter().map(|pp| vec![false; pp.list.len()]).collect();
+    // (shape, obstacle) -> entries (phase value, pair-phase index, list index, distance).
+    let mut by_pair: std::collections::HashMap<(usize, usize), Vec<PairEntry>> =
+        std::collections::HashMap::new();
+    for (k, pp) in pairs.iter().enumerate() {
+        for (i, c) in pp.list.iter().enumerate() {
+            by_pair.entry((c.shape, c.obstacle)).or_default().push((
+                pp.phase_value,
+                k,
+                i,
+                c.distance,
+            ));
+        }
+    }
+    for entries in by_pair.values_mut() {
+        entries.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let n = entries.len();
+        let mut run = 0usize;
+        for e in 0..n {
+            let d = entries[e].3;
+            let before = if e > 0 {
+                entries[e - 1].3
+            } else {
+                f64::INFINITY
+            };
+            let after = if e + 1 < n {
+                entries[e + 1].3
+            } else {
+                f64::INFINITY
+            };
+            let minimum = d <= before && d <= after;
+            let short = d < target;
+            let thinned = if short {
+                run += 1;
+                (run - 1) % VIOLATION_STRIDE == 0
+            } else {
+                run = 0;
+                false
+            };
+            if minimum || thinned {
+                keep[entries[e].1][entries[e].2] = true;
+            }
+        }
+    }
+    keep
 }
 
 /// Keep the `k` closest robot shapes per obstacle (order preserved).
