@@ -1,10 +1,199 @@
-//! `dpmp robot` (being built).
+//! `dpmp robot`: forward kinematics, clearance, inverse kinematics and
+//! collision primitives of the robot model, printed as JSON.
+
+use crate::robot::{IkOptions, IkTarget, Robot};
+use crate::scene::Scene;
+use crate::{Error, Result};
+use nalgebra::{Point3, Unit, Vector3};
+use serde_json::{json, Map, Value};
+use std::path::PathBuf;
 
 /// `dpmp robot` subcommands.
 #[derive(Debug, clap::Subcommand)]
-pub enum RobotCommand {}
+pub enum RobotCommand {
+    /// Pose of every link: `{"frames": {"<link>": {"position", "quaternion"}}}`.
+    Fk(FkArgs),
+    /// Minimum signed clearance against a scene file (`{"obstacles": [...]}`).
+    Clearance(ClearanceArgs),
+    /// Inverse kinematics for a TCP position (and optional approach axis).
+    Ik(IkArgs),
+    /// The collision primitives of every link (link frames).
+    Shapes(ModelArgs),
+}
+
+/// Which robot to load (default: the shipped Panda).
+#[derive(Debug, clap::Args)]
+pub struct ModelArgs {
+    /// A URDF file instead of the shipped Panda.
+    #[arg(long)]
+    pub urdf: Option<PathBuf>,
+    /// Base link of the chain (with --urdf).
+    #[arg(long, default_value = "panda_link0")]
+    pub base: String,
+    /// Tip link of the chain (with --urdf).
+    #[arg(long, default_value = "panda_tcp")]
+    pub tip: String,
+}
+
+/// Arguments of `dpmp robot fk`.
+#[derive(Debug, clap::Args)]
+pub struct FkArgs {
+    /// Joint values, comma separated (rad), one per joint.
+    #[arg(long, allow_hyphen_values = true)]
+    pub q: String,
+    /// The robot model.
+    #[command(flatten)]
+    pub model: ModelArgs,
+}
+
+/// Arguments of `dpmp robot clearance`.
+#[derive(Debug, clap::Args)]
+pub struct ClearanceArgs {
+    /// Joint values, comma separated (rad), one per joint.
+    #[arg(long, allow_hyphen_values = true)]
+    pub q: String,
+    /// Scene file: `{"obstacles": [...]}` in the request schema.
+    #[arg(long)]
+    pub scene: PathBuf,
+    /// Also list every pair closer than this (m).
+    #[arg(long)]
+    pub activation: Option<f64>,
+    /// The robot model.
+    #[command(flatten)]
+    pub model: ModelArgs,
+}
+
+/// Arguments of `dpmp robot ik`.
+#[derive(Debug, clap::Args)]
+pub struct IkArgs {
+    /// Target TCP position `x,y,z` (m, base frame).
+    #[arg(long, allow_hyphen_values = true)]
+    pub position: String,
+    /// Desired TCP z axis `x,y,z` (normalised; must not be zero).
+    #[arg(long, allow_hyphen_values = true)]
+    pub axis: Option<String>,
+    /// Seed configuration (default: home).
+    #[arg(long, allow_hyphen_values = true)]
+    pub seed: Option<String>,
+    /// The robot model.
+    #[command(flatten)]
+    pub model: ModelArgs,
+}
 
 /// Run a `dpmp robot` subcommand.
-pub fn run(command: RobotCommand) -> crate::Result<()> {
-    match command {}
+pub fn run(command: RobotCommand) -> Result<()> {
+    let value = match command {
+        RobotCommand::Fk(args) => fk_json(&load_robot(&args.model)?, &args.q)?,
+        RobotCommand::Clearance(args) => clearance_json(&args)?,
+        RobotCommand::Ik(args) => ik_json(&args)?,
+        RobotCommand::Shapes(model) => {
+            let robot = load_robot(&model)?;
+            json!({"link_names": robot.link_names(), "shapes": robot.collision_shapes()})
+        }
+    };
+    super::print_json(&value)
+}
+
+/// The robot named by the flags.
+pub fn load_robot(model: &ModelArgs) -> Result<Robot> {
+    match &model.urdf {
+        None => Robot::panda(),
+        Some(path) => Robot::from_urdf_file(path, &model.base, &model.tip),
+    }
+}
+
+/// Parse `a,b,c` into numbers; errors name `flag[i]`.
+pub fn parse_list(flag: &str, text: &str) -> Result<Vec<f64>> {
+    text.split(',')
+        .enumerate()
+        .map(|(i, part)| {
+            part.trim().parse::<f64>().map_err(|_| {
+                Error::invalid(
+                    format!("{flag}[{i}]"),
+                    format!("not a number: \"{}\"", part.trim()),
+                )
+            })
+        })
+        .collect::<Result<Vec<_>>>()
+        .and_then(|v| crate::error::ensure_finite(flag, &v).map(|_| v))
+}
+
+fn parse_configuration(robot: &Robot, flag: &str, text: &str) -> Result<Vec<f64>> {
+    let q = parse_list(flag, text)?;
+    robot.validate_configuration(flag, &q)?;
+    Ok(q)
+}
+
+fn parse_vector(flag: &str, text: &str) -> Result<Vector3<f64>> {
+    let v = parse_list(flag, text)?;
+    crate::error::ensure_len(flag, &v, 3)?;
+    Ok(Vector3::new(v[0], v[1], v[2]))
+}
+
+/// `{"frames": {"<link>": {"position": [...], "quaternion": [x, y, z, w]}}}`.
+pub fn fk_json(robot: &Robot, q_text: &str) -> Result<Value> {
+    let q = parse_configuration(robot, "--q", q_text)?;
+    let frames = robot.fk(&q);
+    let mut out = Map::new();
+    for (name, pose) in robot.link_names().iter().zip(&frames.poses) {
+        let r = pose.rotation;
+        out.insert(
+            name.clone(),
+            json!({"position": pose.translation.vector.as_slice(), "quaternion": [r.i, r.j, r.k, r.w]}),
+        );
+    }
+    Ok(json!({"joint_names": robot.joint_names(), "q": q, "frames": out}))
+}
+
+fn clearance_json(args: &ClearanceArgs) -> Result<Value> {
+    let robot = load_robot(&args.model)?;
+    let q = parse_configuration(&robot, "--q", &args.q)?;
+    let scene = Scene::from_file(&args.scene)?;
+    let frames = robot.fk(&q);
+    let mut out = match scene.min_clearance(&robot, &frames) {
+        None => json!({"min_clearance_m": null, "link": null, "obstacle": null}),
+        Some(c) => {
+            let gradient = scene.clearance_gradient(&robot, &q, &frames, &c);
+            json!({
+                "min_clearance_m": c.distance,
+                "link": c.link_name,
+                "obstacle": c.obstacle_id,
+                "shape": c.shape,
+                "point_robot": c.point_robot,
+                "point_obstacle": c.point_obstacle,
+                "normal": c.normal,
+                "gradient": gradient.as_slice(),
+            })
+        }
+    };
+    if let Some(activation) = args.activation {
+        if !activation.is_finite() {
+            return Err(Error::invalid("--activation", "must be a finite number"));
+        }
+        out["within"] = serde_json::to_value(scene.clearances_within(&robot, &frames, activation))
+            .map_err(|e| Error::Numerical(e.to_string()))?;
+    }
+    Ok(out)
+}
+
+fn ik_json(args: &IkArgs) -> Result<Value> {
+    let robot = load_robot(&args.model)?;
+    let position = parse_vector("--position", &args.position)?;
+    let approach_axis = match &args.axis {
+        None => None,
+        Some(text) => Some(
+            Unit::try_new(parse_vector("--axis", text)?, 1e-9)
+                .ok_or_else(|| Error::invalid("--axis", "must not be zero"))?,
+        ),
+    };
+    let seed = match &args.seed {
+        None => robot.home(),
+        Some(text) => parse_configuration(&robot, "--seed", text)?,
+    };
+    let target = IkTarget {
+        position: Point3::from(position),
+        approach_axis,
+    };
+    let solution = robot.ik(&target, &seed, &IkOptions::default())?;
+    serde_json::to_value(solution).map_err(|e| Error::Numerical(e.to_string()))
 }

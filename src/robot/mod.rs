@@ -1,1 +1,233 @@
-//! (being built)
+//! The robot: a serial kinematic chain read from URDF, with forward
+//! kinematics, point Jacobians, damped-least-squares inverse kinematics and
+//! the convex collision primitives attached to every link.
+//!
+//! - [`urdf`]: loading with urdf-rs, choosing the base→tip chain, validation;
+//! - [`chain`]: the compiled chain (fixed origins + joint motions);
+//! - [`fk`]: forward kinematics of every link frame ([`Frames`]);
+//! - [`jacobian`]: Jacobians of points attached to links and of the TCP;
+//! - [`ik`]: inverse kinematics for a TCP position and approach axis;
+//! - [`collision`]: the link collision primitives ([`LinkShape`]);
+//! - [`fit`] and [`stl`]: fitting capsules to collision meshes (how
+//!   `models/panda/panda.urdf` was made) and reading binary STL.
+//!
+//! The Franka Panda ([`Robot::panda`]) is the default; any URDF serial arm
+//! with revolute, prismatic and fixed joints loads the same way.
+
+pub mod chain;
+pub mod collision;
+pub mod fit;
+pub mod fk;
+pub mod ik;
+pub mod jacobian;
+pub mod stl;
+pub mod urdf;
+
+pub use collision::{LinkShape, ShapeGeometry};
+pub use fk::Frames;
+pub use ik::{IkOptions, IkSolution, IkTarget};
+
+use crate::{Error, Result};
+use chain::ChainStep;
+use serde::Serialize;
+
+/// The shipped Panda description (see the comment at its top for the
+/// collision-geometry fit).
+pub const PANDA_URDF: &str = include_str!("../../models/panda/panda.urdf");
+
+/// The paper's home configuration of the Panda (rad), shared by all 25
+/// annotated demonstrations.
+pub const PANDA_HOME: [f64; 7] = [0.0348, -1.0102, -0.1525, -2.5334, -0.1583, 2.8798, 0.0543];
+
+/// Position and velocity limits of one actuated joint (rad, rad/s; m, m/s
+/// for prismatic joints).
+#[derive(Clone, Copy, Debug, Serialize, PartialEq)]
+pub struct JointLimit {
+    /// Lowest position.
+    pub lower: f64,
+    /// Highest position.
+    pub upper: f64,
+    /// Largest speed (absolute).
+    pub velocity: f64,
+}
+
+impl JointLimit {
+    /// Whether `q` lies within `[lower, upper]`.
+    pub fn contains(&self, q: f64) -> bool {
+        q >= self.lower && q <= self.upper
+    }
+
+    /// Middle of the range.
+    pub fn mid(&self) -> f64 {
+        0.5 * (self.lower + self.upper)
+    }
+}
+
+/// A serial-chain robot: links from the base to the tip, the actuated joints
+/// between them, limits and collision primitives. Cheap to clone, `Send +
+/// Sync`, immutable after loading.
+#[derive(Clone, Debug)]
+pub struct Robot {
+    pub(crate) name: String,
+    pub(crate) joint_names: Vec<String>,
+    pub(crate) limits: Vec<JointLimit>,
+    pub(crate) link_names: Vec<String>,
+    /// `steps[k]` moves from link `k` to link `k + 1`.
+    pub(crate) steps: Vec<ChainStep>,
+    /// The step of each actuated joint (its child link is `step + 1`).
+    pub(crate) dof_step: Vec<usize>,
+    pub(crate) shapes: Vec<LinkShape>,
+    pub(crate) home: Vec<f64>,
+}
+
+impl Robot {
+    /// The shipped Franka Panda (`models/panda/panda.urdf`, embedded), from
+    /// `panda_link0` to `panda_tcp`, with the paper's home configuration.
+    pub fn panda() -> Result<Robot> {
+        Robot::from_urdf_str(PANDA_URDF, "panda_link0", "panda_tcp")?.with_home(&PANDA_HOME)
+    }
+
+    /// Load the chain from `base` to `tip` out of URDF text. The home
+    /// configuration is the middle of every joint range.
+    pub fn from_urdf_str(xml: &str, base: &str, tip: &str) -> Result<Robot> {
+        urdf::robot_from_str(xml, base, tip)
+    }
+
+    /// Load the chain from `base` to `tip` out of a URDF file; errors name
+    /// the file.
+    pub fn from_urdf_file(path: &std::path::Path, base: &str, tip: &str) -> Result<Robot> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::file(path, e.to_string()))?;
+        Robot::from_urdf_str(&text, base, tip).map_err(|e| Error::file(path, e.to_string()))
+    }
+
+    /// Replace the home configuration (validated: length, finite, within
+    /// limits).
+    pub fn with_home(mut self, home: &[f64]) -> Result<Robot> {
+        self.validate_configuration("home", home)?;
+        self.validate_within_limits("home", home)?;
+        self.home = home.to_vec();
+        Ok(self)
+    }
+
+    /// The robot's name from the URDF.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// Number of actuated joints (7 for the Panda).
+    pub fn dof(&self) -> usize {
+        self.joint_names.len()
+    }
+
+    /// Names of the actuated joints, base to tip.
+    pub fn joint_names(&self) -> &[String] {
+        &self.joint_names
+    }
+
+    /// Limits of the actuated joints, base to tip.
+    pub fn limits(&self) -> &[JointLimit] {
+        &self.limits
+    }
+
+    /// The home configuration (Panda: the paper's; otherwise mid-range).
+    pub fn home(&self) -> Vec<f64> {
+        self.home.clone()
+    }
+
+    /// Every link along the chain, base first, fixed ones included.
+    pub fn link_names(&self) -> &[String] {
+        &self.link_names
+    }
+
+    /// Index of the link called `name` in [`Robot::link_names`].
+    pub fn link_index(&self, name: &str) -> Option<usize> {
+        self.link_names.iter().position(|n| n == name)
+    }
+
+    /// Index of the tip link (the TCP for the Panda).
+    pub fn tcp_link(&self) -> usize {
+        self.link_names.len() - 1
+    }
+
+    /// Every collision primitive, attached to a link of [`Robot::link_names`]
+    /// (shapes of fixed side links such as the fingers are moved onto the
+    /// chain link they hang from).
+    pub fn collision_shapes(&self) -> &[LinkShape] {
+        &self.shapes
+    }
+
+    /// Check that `q` has one finite number per joint (not the limits);
+    /// errors name `field[i]`.
+    pub fn validate_configuration(&self, field: &str, q: &[f64]) -> Result<()> {
+        crate::error::ensure_len(field, q, self.dof())?;
+        crate::error::ensure_finite(field, q)
+    }
+
+    /// Check that every entry of `q` lies within its joint's limits; errors
+    /// name `field[i]` and the joint.
+    pub fn validate_within_limits(&self, field: &str, q: &[f64]) -> Result<()> {
+        for (i, (value, limit)) in q.iter().zip(&self.limits).enumerate() {
+            if !limit.contains(*value) {
+                return Err(Error::invalid(
+                    format!("{field}[{i}]"),
+                    format!(
+                        "{} = {value} is outside its limits [{}, {}]",
+                        self.joint_names[i], limit.lower, limit.upper
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn panda_has_seven_joints_and_the_named_links() {
+        let robot = Robot::panda().unwrap();
+        assert_eq!(robot.dof(), 7);
+        let names: Vec<&str> = robot.link_names().iter().map(|s| s.as_str()).collect();
+        assert_eq!(
+            names,
+            [
+                "panda_link0",
+                "panda_link1",
+                "panda_link2",
+                "panda_link3",
+                "panda_link4",
+                "panda_link5",
+                "panda_link6",
+                "panda_link7",
+                "panda_link8",
+                "panda_hand",
+                "panda_tcp"
+            ]
+        );
+        assert_eq!(robot.tcp_link(), 10);
+        assert_eq!(robot.link_index("panda_hand"), Some(9));
+        assert_eq!(robot.home(), PANDA_HOME.to_vec());
+        assert_eq!(robot.limits()[3].upper, -0.0698);
+        assert_eq!(robot.limits()[5].velocity, 2.61);
+    }
+
+    #[test]
+    fn configuration_validation_names_the_index() {
+        let robot = Robot::panda().unwrap();
+        let e = robot
+            .validate_configuration("start", &[0.0; 6])
+            .unwrap_err();
+        assert_eq!(e.field(), Some("start"));
+        let mut q = PANDA_HOME;
+        q[4] = f64::INFINITY;
+        let e = robot.validate_configuration("start", &q).unwrap_err();
+        assert_eq!(e.field(), Some("start[4]"));
+        let mut q = PANDA_HOME;
+        q[3] = 0.1;
+        let e = robot.validate_within_limits("goal", &q).unwrap_err();
+        assert_eq!(e.field(), Some("goal[3]"));
+        assert!(e.to_string().contains("panda_joint4"));
+    }
+}

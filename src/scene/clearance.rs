@@ -1,0 +1,205 @@
+//! Robot-versus-scene clearance queries: the minimum signed distance over
+//! every (robot primitive, obstacle) pair, the pairs within an activation
+//! distance, and the gradient of a pair's distance with respect to the
+//! joint angles.
+//!
+//! The broad phase is a bounds check: each robot primitive's axis-aligned
+//! box (after forward kinematics) against each obstacle's (precomputed);
+//! pairs whose boxes are further apart than the current best (or the
+//! activation distance) never reach parry.
+
+use super::broadphase::{geometry_bounds, Bounds};
+use super::distance::{pair_contact, PairContact};
+use super::shape::{CompiledObstacle, RobotPart};
+use super::Scene;
+use crate::robot::{Frames, Robot};
+use nalgebra::{DVector, Point3};
+use serde::Serialize;
+
+/// The signed distance between one robot primitive and one obstacle.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct Clearance {
+    /// Signed distance (m), negative when penetrating.
+    pub distance: f64,
+    /// Index into `robot.collision_shapes()`.
+    pub shape: usize,
+    /// Index of the primitive's link in `robot.link_names()`.
+    pub link: usize,
+    /// Name of that link.
+    pub link_name: String,
+    /// Index of the obstacle in `scene.obstacles()`.
+    pub obstacle: usize,
+    /// Its id.
+    pub obstacle_id: String,
+    /// Witness point on the robot (base frame).
+    pub point_robot: [f64; 3],
+    /// Witness point on the obstacle (base frame).
+    pub point_obstacle: [f64; 3],
+    /// Unit normal from the obstacle towards the robot: moving the robot
+    /// witness point along it increases the distance.
+    pub normal: [f64; 3],
+}
+
+/// A robot primitive placed by forward kinematics.
+pub(crate) struct PlacedShape {
+    pub index: usize,
+    pub part: RobotPart,
+    pub bounds: Bounds,
+}
+
+/// Every robot primitive in the base frame for `frames`.
+pub(crate) fn place_robot(robot: &Robot, frames: &Frames) -> Vec<PlacedShape> {
+    robot
+        .collision_shapes()
+        .iter()
+        .enumerate()
+        .map(|(index, s)| {
+            let world = s.geometry.transformed(&frames.poses[s.link]);
+            PlacedShape {
+                index,
+                bounds: geometry_bounds(&world),
+                part: RobotPart::new(&world),
+            }
+        })
+        .collect()
+}
+
+/// Closest contact between a placed primitive and every part of an
+/// obstacle, below `prediction`.
+fn obstacle_contact(
+    shape: &PlacedShape,
+    obstacle: &CompiledObstacle,
+    prediction: f64,
+) -> Option<PairContact> {
+    obstacle
+        .parts
+        .iter()
+        .filter_map(|part| pair_contact(&shape.part, part, prediction))
+        .min_by(|a, b| a.distance.total_cmp(&b.distance))
+}
+
+impl Scene {
+    /// The minimum signed distance between the robot at `frames` and the
+    /// scene, with the responsible primitive, link and obstacle; `None` when
+    /// the scene is empty.
+    pub fn min_clearance(&self, robot: &Robot, frames: &Frames) -> Option<Clearance> {
+        let (shape, obstacle, contact) = self.closest_pair(robot, &place_robot(robot, frames))?;
+        Some(self.clearance(robot, shape, obstacle, &contact))
+    }
+
+    /// Every (robot primitive, obstacle) pair closer than `activation_m`
+    /// (signed), in primitive-then-obstacle order.
+    pub fn clearances_within(
+        &self,
+        robot: &Robot,
+        frames: &Frames,
+        activation_m: f64,
+    ) -> Vec<Clearance> {
+        let mut out = Vec::new();
+        if self.is_empty() || !activation_m.is_finite() {
+            return out;
+        }
+        for shape in place_robot(robot, frames) {
+            for (k, obstacle) in self.compiled.iter().enumerate() {
+                let gap = shape.bounds.gap(&obstacle.bounds);
+                if gap >= activation_m && gap > 0.0 {
+                    continue;
+                }
+                if let Some(contact) = obstacle_contact(&shape, obstacle, activation_m) {
+                    if contact.distance < activation_m {
+                        out.push(self.clearance(robot, shape.index, k, &contact));
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// `d(c.distance)/dq` at configuration `q` (whose forward kinematics is
+    /// `frames`): the normal times the Jacobian of the robot witness point on
+    /// its link. `dof` entries.
+    pub fn clearance_gradient(
+        &self,
+        robot: &Robot,
+        q: &[f64],
+        frames: &Frames,
+        c: &Clearance,
+    ) -> DVector<f64> {
+        let point = Point3::from(c.point_robot);
+        let jacobian = robot.point_jacobian(q, frames, c.link, &point);
+        let normal = nalgebra::Vector3::from(c.normal);
+        jacobian.transpose() * normal
+    }
+
+    /// The minimum clearance at `q` and its gradient (one forward kinematics).
+    pub fn min_clearance_with_gradient(
+        &self,
+        robot: &Robot,
+        q: &[f64],
+    ) -> Option<(Clearance, DVector<f64>)> {
+        let frames = robot.fk(q);
+        let c = self.min_clearance(robot, &frames)?;
+        let g = self.clearance_gradient(robot, q, &frames, &c);
+        Some((c, g))
+    }
+
+    /// The closest (primitive index, obstacle index, contact): the pair
+    /// with the smallest bounds gap first, then every pair whose bounds gap
+    /// is below the best distance so far.
+    fn closest_pair(
+        &self,
+        robot: &Robot,
+        placed: &[PlacedShape],
+    ) -> Option<(usize, usize, PairContact)> {
+        if self.is_empty() || placed.is_empty() || robot.collision_shapes().is_empty() {
+            return None;
+        }
+        let mut seed = (0, 0, f64::INFINITY);
+        for (s, shape) in placed.iter().enumerate() {
+            for (k, obstacle) in self.compiled.iter().enumerate() {
+                let gap = shape.bounds.gap(&obstacle.bounds);
+                if gap < seed.2 {
+                    seed = (s, k, gap);
+                }
+            }
+        }
+        let far = seed.2 + self.bounds_diameter() + 1.0;
+        let first = obstacle_contact(&placed[seed.0], &self.compiled[seed.1], far)?;
+        let mut best = (placed[seed.0].index, seed.1, first);
+        for (s, shape) in placed.iter().enumerate() {
+            for (k, obstacle) in self.compiled.iter().enumerate() {
+                let gap = shape.bounds.gap(&obstacle.bounds);
+                if (s, k) == (seed.0, seed.1) || (gap >= best.2.distance && gap > 0.0) {
+                    continue;
+                }
+                if let Some(contact) = obstacle_contact(shape, obstacle, best.2.distance) {
+                    if contact.distance < best.2.distance {
+                        best = (shape.index, k, contact);
+                    }
+                }
+            }
+        }
+        Some(best)
+    }
+
+    fn clearance(
+        &self,
+        robot: &Robot,
+        shape: usize,
+        obstacle: usize,
+        contact: &PairContact,
+    ) -> Clearance {
+        let link_shape = &robot.collision_shapes()[shape];
+        Clearance {
+            distance: contact.distance,
+            shape,
+            link: link_shape.link,
+            link_name: link_shape.link_name.clone(),
+            obstacle,
+            obstacle_id: self.obstacles[obstacle].id.clone(),
+            point_robot: contact.point_robot.into(),
+            point_obstacle: contact.point_obstacle.into(),
+            normal: contact.normal.into(),
+        }
+    }
+}

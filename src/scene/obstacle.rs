@@ -1,0 +1,315 @@
+//! Obstacle types (the request schema of DESIGN.md) and their validation.
+//!
+//! ```json
+//! {"id": "berry-2", "type": "sphere", "center": [x, y, z], "radius": 0.015}
+//! {"id": "stem-2", "type": "capsule", "a": [x, y, z], "b": [x, y, z], "radius": 0.003}
+//! {"id": "post", "type": "cylinder", "a": [x, y, z], "b": [x, y, z], "radius": 0.02}
+//! {"id": "tray", "type": "box", "center": [x, y, z], "half_extents": [a, b, c], "rotation": [0, 0, 0, 1]}
+//! {"id": "leaf", "type": "convex", "points": [[x, y, z], ...]}
+//! {"id": "berry-3", "type": "berry", "center": [x, y, z], "radius": 0.014,
+//!  "elongation": 0.006, "stem_top": [x, y, z], "stem_radius": 0.002}
+//! ```
+//!
+//! Unknown fields are rejected; a box `rotation` defaults to identity.
+
+use crate::{Error, Result};
+use serde::{Deserialize, Deserializer, Serialize};
+
+/// Quaternions whose norm is further than this from 1 are rejected (closer
+/// ones are normalised).
+pub const QUATERNION_NORM_TOLERANCE: f64 = 1e-3;
+
+/// One named obstacle.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct Obstacle {
+    /// Unique, non-empty name (reported as the closest obstacle).
+    pub id: String,
+    /// The geometry.
+    #[serde(flatten)]
+    pub shape: ObstacleShape,
+}
+
+/// Obstacle geometry, tagged by `"type"`; all convex (a berry is the union of
+/// two convex parts).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
+pub enum ObstacleShape {
+    /// A ball.
+    Sphere {
+        /// Centre (m).
+        center: [f64; 3],
+        /// Radius (m, > 0).
+        radius: f64,
+    },
+    /// Points within `radius` of the segment `a`–`b`.
+    Capsule {
+        /// First end of the axis.
+        a: [f64; 3],
+        /// Second end of the axis.
+        b: [f64; 3],
+        /// Radius (m, > 0).
+        radius: f64,
+    },
+    /// A flat-ended cylinder between `a` and `b`.
+    Cylinder {
+        /// Centre of the first end face.
+        a: [f64; 3],
+        /// Centre of the second end face (distinct from `a`).
+        b: [f64; 3],
+        /// Radius (m, > 0).
+        radius: f64,
+    },
+    /// An oriented box.
+    Box {
+        /// Centre.
+        center: [f64; 3],
+        /// Half side lengths (all > 0).
+        half_extents: [f64; 3],
+        /// Orientation quaternion `[x, y, z, w]` (default identity).
+        #[serde(default = "identity_rotation")]
+        rotation: [f64; 4],
+    },
+    /// The convex hull of at least 4 non-coplanar points.
+    Convex {
+        /// Hull points.
+        points: Vec<[f64; 3]>,
+    },
+    /// A strawberry with its stem: the body is the set of points within
+    /// `radius` of the segment of half-length `elongation` through `center`
+    /// along the stem direction (a sphere when `elongation` is 0, an
+    /// ellipsoid-like capsule otherwise); the stem is a capsule of
+    /// `stem_radius` from the top of the body to `stem_top`.
+    Berry {
+        /// Centre of the body.
+        center: [f64; 3],
+        /// Body radius across the stem axis (m, > 0).
+        radius: f64,
+        /// Extra half-length of the body along the stem axis (m, >= 0).
+        #[serde(default)]
+        elongation: f64,
+        /// Upper end of the stem (where it joins the plant); it sets the
+        /// stem axis and must lie outside the body.
+        stem_top: [f64; 3],
+        /// Stem radius (m, > 0, at most `radius`).
+        #[serde(default = "default_stem_radius")]
+        stem_radius: f64,
+    },
+}
+
+/// The `--scene FILE.json` format: `{"obstacles": [...]}`.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SceneFile {
+    /// The obstacles, in the request schema.
+    pub obstacles: Vec<Obstacle>,
+}
+
+fn identity_rotation() -> [f64; 4] {
+    [0.0, 0.0, 0.0, 1.0]
+}
+
+fn default_stem_radius() -> f64 {
+    0.002
+}
+
+impl<'de> Deserialize<'de> for Obstacle {
+    /// `id` plus the fields of one [`ObstacleShape`] variant; unknown fields
+    /// are rejected and errors mention the id.
+    fn deserialize<D: Deserializer<'de>>(deserializer: D) -> std::result::Result<Self, D::Error> {
+        use serde::de::Error as _;
+        let mut map = serde_json::Map::<String, serde_json::Value>::deserialize(deserializer)?;
+        let id = match map.remove("id") {
+            Some(serde_json::Value::String(id)) => id,
+            Some(other) => {
+                return Err(D::Error::custom(format!(
+                    "obstacle id must be a string, got {other}"
+                )))
+            }
+            None => return Err(D::Error::custom("obstacle without an \"id\"")),
+        };
+        let shape = ObstacleShape::deserialize(serde_json::Value::Object(map))
+            .map_err(|e| D::Error::custom(format!("obstacle \"{id}\": {e}")))?;
+        Ok(Obstacle { id, shape })
+    }
+}
+
+impl Obstacle {
+    /// Validate one obstacle; errors name `obstacles[index].<field>` and the id.
+    pub fn validate(&self, index: usize) -> Result<()> {
+        let at = |field: &str| format!("obstacles[{index}].{field}");
+        let fail = |field: &str, msg: String| {
+            Error::invalid(at(field), format!("obstacle \"{}\": {msg}", self.id))
+        };
+        let finite = |field: &str, values: &[f64]| -> Result<()> {
+            match values.iter().position(|v| !v.is_finite()) {
+                None => Ok(()),
+                Some(i) => Err(fail(
+                    &format!("{field}[{i}]"),
+                    format!("must be a finite number, got {}", values[i]),
+                )),
+            }
+        };
+        let positive = |field: &str, v: f64| -> Result<()> {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(fail(field, format!("must be a finite number > 0, got {v}")))
+            }
+        };
+        match &self.shape {
+            ObstacleShape::Sphere { center, radius } => {
+                finite("center", center)?;
+                positive("radius", *radius)
+            }
+            ObstacleShape::Capsule { a, b, radius } => {
+                finite("a", a)?;
+                finite("b", b)?;
+                positive("radius", *radius)
+            }
+            ObstacleShape::Cylinder { a, b, radius } => {
+                finite("a", a)?;
+                finite("b", b)?;
+                positive("radius", *radius)?;
+                if distance(a, b) < 1e-9 {
+                    return Err(fail(
+                        "b",
+                        "must differ from a (zero-length cylinder)".into(),
+                    ));
+                }
+                Ok(())
+            }
+            ObstacleShape::Box {
+                center,
+                half_extents,
+                rotation,
+            } => {
+                finite("center", center)?;
+                for (i, h) in half_extents.iter().enumerate() {
+                    positive(&format!("half_extents[{i}]"), *h)?;
+                }
+                finite("rotation", rotation)?;
+                let norm = rotation.iter().map(|x| x * x).sum::<f64>().sqrt();
+                if (norm - 1.0).abs() > QUATERNION_NORM_TOLERANCE {
+                    return Err(fail(
+                        "rotation",
+                        format!("must be a unit quaternion [x, y, z, w], norm is {norm}"),
+                    ));
+                }
+                Ok(())
+            }
+            ObstacleShape::Convex { points } => {
+                for (i, p) in points.iter().enumerate() {
+                    finite(&format!("points[{i}]"), p)?;
+                }
+                if points.len() < 4 {
+                    return Err(fail(
+                        "points",
+                        format!(
+                            "a convex hull needs at least 4 points, got {}",
+                            points.len()
+                        ),
+                    ));
+                }
+                if hull_thickness(points) < 1e-6 {
+                    return Err(fail(
+                        "points",
+                        "the points are coplanar (the hull has no volume)".into(),
+                    ));
+                }
+                Ok(())
+            }
+            ObstacleShape::Berry {
+                center,
+                radius,
+                elongation,
+                stem_top,
+                stem_radius,
+            } => {
+                finite("center", center)?;
+                positive("radius", *radius)?;
+                if !(elongation.is_finite() && *elongation >= 0.0) {
+                    return Err(fail(
+                        "elongation",
+                        format!("must be a finite number >= 0, got {elongation}"),
+                    ));
+                }
+                finite("stem_top", stem_top)?;
+                positive("stem_radius", *stem_radius)?;
+                if stem_radius > radius {
+                    return Err(fail(
+                        "stem_radius",
+                        format!("must not exceed the radius {radius}, got {stem_radius}"),
+                    ));
+                }
+                if distance(center, stem_top) <= radius + elongation {
+                    return Err(fail("stem_top", "must lie outside the berry body".into()));
+                }
+                Ok(())
+            }
+        }
+    }
+}
+
+/// Validate a list of obstacles: each one, plus unique non-empty ids.
+pub fn validate_obstacles(obstacles: &[Obstacle]) -> Result<()> {
+    let mut seen = std::collections::HashMap::new();
+    for (i, obstacle) in obstacles.iter().enumerate() {
+        if obstacle.id.trim().is_empty() {
+            return Err(Error::invalid(
+                format!("obstacles[{i}].id"),
+                "obstacle id must not be empty",
+            ));
+        }
+        if let Some(first) = seen.insert(obstacle.id.as_str(), i) {
+            return Err(Error::invalid(
+                format!("obstacles[{i}].id"),
+                format!(
+                    "obstacle \"{}\": id already used by obstacles[{first}]",
+                    obstacle.id
+                ),
+            ));
+        }
+        obstacle.validate(i)?;
+    }
+    Ok(())
+}
+
+fn distance(a: &[f64; 3], b: &[f64; 3]) -> f64 {
+    (0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f64>().sqrt()
+}
+
+/// Largest distance of any point from the plane through three well-spread
+/// points (0 for coplanar or collinear sets).
+fn hull_thickness(points: &[[f64; 3]]) -> f64 {
+    use nalgebra::Vector3;
+    let v: Vec<Vector3<f64>> = points.iter().map(|p| Vector3::from(*p)).collect();
+    let p0 = v[0];
+    let Some(p1) = v
+        .iter()
+        .copied()
+        .max_by(|a, b| (a - p0).norm().total_cmp(&(b - p0).norm()))
+    else {
+        return 0.0;
+    };
+    let line = p1 - p0;
+    if line.norm() < 1e-12 {
+        return 0.0;
+    }
+    let dir = line.normalize();
+    let off_line = |p: &Vector3<f64>| ((p - p0) - dir * (p - p0).dot(&dir)).norm();
+    let Some(p2) = v
+        .iter()
+        .copied()
+        .max_by(|a, b| off_line(a).total_cmp(&off_line(b)))
+    else {
+        return 0.0;
+    };
+    let normal = line.cross(&(p2 - p0));
+    if normal.norm() < 1e-12 {
+        return 0.0;
+    }
+    let normal = normal.normalize();
+    v.iter()
+        .map(|p| (p - p0).dot(&normal).abs())
+        .fold(0.0, f64::max)
+}

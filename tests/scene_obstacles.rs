@@ -1,0 +1,216 @@
+//! Obstacle JSON (the request schema) and validation errors that name the
+//! field and the obstacle id.
+
+use dpmp::scene::{Obstacle, ObstacleShape, Scene, SceneFile};
+
+const REQUEST_OBSTACLES: &str = r#"{"obstacles": [
+    {"id": "berry-2", "type": "sphere", "center": [0.6, 0.0, 0.7], "radius": 0.015},
+    {"id": "stem-2", "type": "capsule", "a": [0.6, 0.0, 0.715], "b": [0.6, 0.0, 0.8], "radius": 0.003},
+    {"id": "tray", "type": "box", "center": [0.5, 0.0, 0.2], "half_extents": [0.1, 0.2, 0.05],
+     "rotation": [0, 0, 0, 1]},
+    {"id": "leaf", "type": "convex", "points": [[0.5, 0.1, 0.6], [0.55, 0.1, 0.6], [0.5, 0.15, 0.6], [0.52, 0.12, 0.62]]},
+    {"id": "post", "type": "cylinder", "a": [0.8, 0.3, 0.0], "b": [0.8, 0.3, 1.0], "radius": 0.02},
+    {"id": "berry-3", "type": "berry", "center": [0.65, 0.1, 0.7], "radius": 0.014, "elongation": 0.005,
+     "stem_top": [0.65, 0.1, 0.78], "stem_radius": 0.002},
+    {"id": "plate", "type": "box", "center": [0.0, 0.5, 0.0], "half_extents": [0.1, 0.1, 0.01]}
+]}"#;
+
+fn parse(text: &str) -> Result<SceneFile, serde_json::Error> {
+    serde_json::from_str(text)
+}
+
+#[test]
+fn the_request_examples_parse_and_round_trip() {
+    let file = parse(REQUEST_OBSTACLES).unwrap();
+    assert_eq!(file.obstacles.len(), 7);
+    assert_eq!(file.obstacles[0].id, "berry-2");
+    assert_eq!(
+        file.obstacles[0].shape,
+        ObstacleShape::Sphere {
+            center: [0.6, 0.0, 0.7],
+            radius: 0.015
+        }
+    );
+    match &file.obstacles[6].shape {
+        ObstacleShape::Box { rotation, .. } => assert_eq!(*rotation, [0.0, 0.0, 0.0, 1.0]),
+        other => panic!("{other:?}"),
+    }
+    match &file.obstacles[5].shape {
+        ObstacleShape::Berry {
+            elongation,
+            stem_radius,
+            ..
+        } => {
+            assert_eq!(*elongation, 0.005);
+            assert_eq!(*stem_radius, 0.002);
+        }
+        other => panic!("{other:?}"),
+    }
+    let text = serde_json::to_string(&file).unwrap();
+    assert!(text.contains(r#""id":"berry-2","type":"sphere""#), "{text}");
+    assert_eq!(parse(&text).unwrap(), file);
+    let scene = Scene::new(file.obstacles).unwrap();
+    assert_eq!(scene.obstacles().len(), 7);
+    assert!(!scene.is_empty());
+}
+
+#[test]
+fn unknown_fields_missing_ids_and_unknown_types_are_rejected() {
+    let e = parse(r#"{"obstacles": [{"id": "b", "type": "sphere", "center": [0,0,0], "radius": 0.1, "colour": 1}]}"#)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("colour") && e.contains("\"b\""), "{e}");
+    let e = parse(r#"{"obstacles": [{"type": "sphere", "center": [0,0,0], "radius": 0.1}]}"#)
+        .unwrap_err();
+    assert!(e.to_string().contains("id"), "{e}");
+    let e =
+        parse(r#"{"obstacles": [{"id": "t", "type": "torus", "center": [0,0,0]}]}"#).unwrap_err();
+    assert!(e.to_string().contains("torus"), "{e}");
+    let e =
+        parse(r#"{"obstacles": [{"id": "s", "type": "sphere", "center": [0,0], "radius": 0.1}]}"#)
+            .unwrap_err();
+    assert!(e.to_string().contains("\"s\""), "{e}");
+    assert!(parse(r#"{"obstacles": [], "extra": 1}"#).is_err());
+}
+
+fn obstacle(id: &str, shape: ObstacleShape) -> Obstacle {
+    Obstacle {
+        id: id.into(),
+        shape,
+    }
+}
+
+fn sphere(id: &str, radius: f64) -> Obstacle {
+    obstacle(
+        id,
+        ObstacleShape::Sphere {
+            center: [0.5, 0.0, 0.5],
+            radius,
+        },
+    )
+}
+
+fn error_of(obstacles: Vec<Obstacle>) -> (String, String) {
+    let e = Scene::new(obstacles).unwrap_err();
+    (e.field().unwrap_or("").to_string(), e.to_string())
+}
+
+#[test]
+fn bad_obstacles_name_the_field_and_the_id() {
+    let (field, msg) = error_of(vec![
+        sphere("a", 0.1),
+        sphere("b", 0.1),
+        sphere("berry-2", -0.01),
+    ]);
+    assert_eq!(field, "obstacles[2].radius");
+    assert!(msg.contains("berry-2"), "{msg}");
+
+    let mut nan = sphere("n", 0.1);
+    if let ObstacleShape::Sphere { center, .. } = &mut nan.shape {
+        center[1] = f64::NAN;
+    }
+    assert_eq!(error_of(vec![nan]).0, "obstacles[0].center[1]");
+
+    let (field, msg) = error_of(vec![sphere("dup", 0.1), sphere("dup", 0.2)]);
+    assert_eq!(field, "obstacles[1].id");
+    assert!(msg.contains("dup"));
+    assert_eq!(error_of(vec![sphere(" ", 0.1)]).0, "obstacles[0].id");
+
+    let flat_box = obstacle(
+        "tray",
+        ObstacleShape::Box {
+            center: [0.0; 3],
+            half_extents: [0.1, 0.0, 0.1],
+            rotation: [0.0, 0.0, 0.0, 1.0],
+        },
+    );
+    let (field, msg) = error_of(vec![flat_box]);
+    assert_eq!(field, "obstacles[0].half_extents[1]");
+    assert!(msg.contains("tray"));
+
+    let skew = obstacle(
+        "skew",
+        ObstacleShape::Box {
+            center: [0.0; 3],
+            half_extents: [0.1; 3],
+            rotation: [0.0, 0.0, 0.0, 2.0],
+        },
+    );
+    assert_eq!(error_of(vec![skew]).0, "obstacles[0].rotation");
+
+    let three = obstacle(
+        "leaf",
+        ObstacleShape::Convex {
+            points: vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+        },
+    );
+    let (field, msg) = error_of(vec![three]);
+    assert_eq!(field, "obstacles[0].points");
+    assert!(msg.contains("leaf") && msg.contains("4"), "{msg}");
+
+    let coplanar = obstacle(
+        "leaf-2",
+        ObstacleShape::Convex {
+            points: vec![
+                [0.0; 3],
+                [1.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0],
+                [1.0, 1.0, 0.0],
+                [0.5, 0.2, 0.0],
+            ],
+        },
+    );
+    let (field, msg) = error_of(vec![coplanar]);
+    assert_eq!(field, "obstacles[0].points");
+    assert!(msg.contains("coplanar"), "{msg}");
+
+    let cylinder = obstacle(
+        "post",
+        ObstacleShape::Cylinder {
+            a: [0.1; 3],
+            b: [0.1; 3],
+            radius: 0.01,
+        },
+    );
+    assert_eq!(error_of(vec![cylinder]).0, "obstacles[0].b");
+
+    let swallowed_stem = obstacle(
+        "berry-9",
+        ObstacleShape::Berry {
+            center: [0.0; 3],
+            radius: 0.02,
+            elongation: 0.01,
+            stem_top: [0.0, 0.0, 0.025],
+            stem_radius: 0.002,
+        },
+    );
+    let (field, msg) = error_of(vec![swallowed_stem]);
+    assert_eq!(field, "obstacles[0].stem_top");
+    assert!(msg.contains("berry-9"));
+
+    let fat_stem = obstacle(
+        "berry-8",
+        ObstacleShape::Berry {
+            center: [0.0; 3],
+            radius: 0.01,
+            elongation: 0.0,
+            stem_top: [0.0, 0.0, 0.1],
+            stem_radius: 0.02,
+        },
+    );
+    assert_eq!(error_of(vec![fat_stem]).0, "obstacles[0].stem_radius");
+}
+
+#[test]
+fn scene_files_load_and_errors_name_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = dir.path().join("scene.json");
+    std::fs::write(&good, REQUEST_OBSTACLES).unwrap();
+    assert_eq!(Scene::from_file(&good).unwrap().obstacles().len(), 7);
+    let bad = dir.path().join("bad.json");
+    std::fs::write(&bad, "{\"obstacles\": [").unwrap();
+    assert!(Scene::from_file(&bad)
+        .unwrap_err()
+        .to_string()
+        .contains("bad.json"));
+}
