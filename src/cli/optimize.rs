@@ -1,13 +1,122 @@
-//! `dpmp optimize` (being built).
+//! `dpmp optimize`: solve one request file (the HTTP request schema) and
+//! print the response JSON; optionally plot prior band, prior mean and the
+//! optimised trajectory per joint.
+
+use crate::optim::{optimize, OptimizeRequest, OptimizeResponse, Problem};
+use crate::plot::{format_of, joint_panels, JointSeries};
+use crate::robot::Robot;
+use crate::{Error, Result};
+use nalgebra::{DMatrix, DVector};
+use plotters::style::RGBColor;
+use std::path::{Path, PathBuf};
 
 /// Arguments of `dpmp optimize`.
 #[derive(Debug, clap::Args)]
-pub struct OptimizeArgs {}
+pub struct OptimizeArgs {
+    /// Request JSON file (same schema as `POST /v1/optimize`).
+    #[arg(long)]
+    pub request: PathBuf,
+    /// Draw prior ±2σ band, prior mean and the optimised trajectory per
+    /// joint into this `.png` or `.svg` file.
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+    /// Robot URDF (default: the shipped Panda).
+    #[arg(long)]
+    pub robot: Option<PathBuf>,
+    /// Base link of `--robot`.
+    #[arg(long, default_value = "panda_link0")]
+    pub base: String,
+    /// Tip link of `--robot`.
+    #[arg(long, default_value = "panda_tcp")]
+    pub tip: String,
+}
 
 /// Run `dpmp optimize`.
-pub fn run(_args: OptimizeArgs) -> crate::Result<()> {
-    Err(crate::Error::invalid(
-        "command",
-        "`dpmp optimize` is not available in this build yet",
-    ))
+pub fn run(args: OptimizeArgs) -> Result<()> {
+    if let Some(plot) = &args.plot {
+        format_of(plot, "--plot")?;
+    }
+    let robot = match &args.robot {
+        Some(path) => Robot::from_urdf_file(path, &args.base, &args.tip)?,
+        None => Robot::panda()?,
+    };
+    let request = read_request(&args.request)?;
+    let response = optimize(&request, &robot).map_err(|e| in_file(e, &args.request))?;
+    if let Some(plot) = &args.plot {
+        let problem = request
+            .validate(&robot)
+            .map_err(|e| in_file(e, &args.request))?;
+        plot_response(plot, &problem, &response)?;
+    }
+    super::print_json(&response)
+}
+
+/// Parse a request file; malformed JSON or unknown fields are invalid input
+/// (exit code 2) naming the file and serde's location.
+pub fn read_request(path: &Path) -> Result<OptimizeRequest> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::file(path, e.to_string()))?;
+    serde_json::from_str(&text).map_err(|e| {
+        Error::invalid(
+            "--request",
+            format!("{}: malformed request: {e}", path.display()),
+        )
+    })
+}
+
+/// Add the file name to a validation error's message.
+fn in_file(e: Error, path: &Path) -> Error {
+    match e {
+        Error::Invalid { field, message } => Error::Invalid {
+            field,
+            message: format!("{message} (in {})", path.display()),
+        },
+        other => other,
+    }
+}
+
+/// Prior band and mean, optimised trajectory, joint limits.
+pub fn plot_response(path: &Path, problem: &Problem, response: &OptimizeResponse) -> Result<()> {
+    let basis = problem.basis();
+    let prior = problem.prior();
+    let times: Vec<f64> = basis
+        .phases()
+        .iter()
+        .map(|z| z * problem.duration())
+        .collect();
+    let w = DVector::from_column_slice(&response.weights);
+    let nb = prior.n_basis;
+    let wm = DMatrix::from_fn(nb, prior.n_joints, |i, j| w[j * nb + i]);
+    let series = [
+        JointSeries {
+            label: "prior mean ± 2σ".into(),
+            color: RGBColor(70, 110, 200),
+            mean: prior.trajectory_mean(basis),
+            std: Some(prior.trajectory_std(basis, 0.0)),
+            sigmas: 2.0,
+        },
+        JointSeries {
+            label: format!("optimised ({:?})", response.status).to_lowercase(),
+            color: RGBColor(220, 60, 40),
+            mean: basis.matrix() * wm,
+            std: None,
+            sigmas: 0.0,
+        },
+    ];
+    let limits: Vec<(f64, f64)> = problem
+        .robot()
+        .limits()
+        .iter()
+        .map(|l| (l.lower, l.upper))
+        .collect();
+    joint_panels(
+        path,
+        &format!(
+            "dPMP optimise: Mahalanobis {:.3}, status {:?}",
+            response.mahalanobis, response.status
+        ),
+        &times,
+        &series,
+        problem.robot().joint_names(),
+        Some(&limits),
+    )
 }

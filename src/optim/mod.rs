@@ -1,1 +1,89 @@
-//! (being built)
+//! The Mahalanobis-closest trajectory optimiser: given a Gaussian prior over
+//! ProMP weights, find the weights closest to it (in Mahalanobis distance)
+//! whose trajectory respects the joint position and velocity limits, the
+//! start configuration, the goal and the clearance to every obstacle.
+//!
+//! - [`request`] — [`OptimizeRequest`] (DESIGN.md's JSON) and [`SolverOptions`].
+//! - [`problem`] — validation into a whitened [`Problem`].
+//! - [`whiten`] — `Σ + λI = L Lᵀ`, `w = μ + L z`: cost `|z|²`.
+//! - [`phases`] — joint positions / velocities as rows in `z` per phase.
+//! - [`linear`] — limit, velocity, equality and opt-in weight-bound rows.
+//! - [`qp`] — one QP in Clarabel (CSC built directly).
+//! - [`scp`] — the trust-region SCP driver, [`SolveControl`], [`Solution`].
+//! - [`verify`] — dense verification and the trajectory output.
+//! - [`diagnose`] — infeasibility diagnosis before solving.
+//! - [`sampling`] — `samples: N` projected prior draws.
+//! - [`report`] — the response types.
+//!
+//! Determinism: the same request gives the same response bytes except for
+//! the wall-clock `solve_ms` fields.
+
+pub mod diagnose;
+pub mod example;
+pub mod linear;
+pub mod phases;
+pub mod problem;
+pub mod qp;
+pub mod report;
+pub mod request;
+pub mod sampling;
+pub mod scp;
+pub mod verify;
+pub mod whiten;
+
+pub use problem::{Problem, FEASIBILITY_TOLERANCE};
+pub use report::{
+    Closest, JointTrajectory, OptimizeResponse, SampleResult, Status, TrajectoryPoint,
+    TrajectoryReport,
+};
+pub use request::{Goal, OptimizeRequest, PriorSpec, SolverOptions};
+pub use scp::{Solution, SolveControl, SolveStats};
+
+use crate::robot::Robot;
+use crate::Result;
+
+/// Validate, diagnose, solve and verify one request.
+pub fn optimize(request: &OptimizeRequest, robot: &Robot) -> Result<OptimizeResponse> {
+    optimize_with(request, robot, &SolveControl::default())
+}
+
+/// [`optimize`] with a deadline / cancel flag: a stopped solve answers
+/// status `max_iterations` with a warning.
+pub fn optimize_with(
+    request: &OptimizeRequest,
+    robot: &Robot,
+    ctl: &SolveControl,
+) -> Result<OptimizeResponse> {
+    let problem = request.validate(robot)?;
+    let mean = problem.prior().mean.as_slice().to_vec();
+    let mut prior_mean_report = problem.evaluate(&mean);
+    prior_mean_report.warnings = problem.warnings().to_vec();
+    if let Some(reason) = problem.diagnose() {
+        return Ok(OptimizeResponse {
+            status: Status::Infeasible,
+            mahalanobis: 0.0,
+            trajectory: problem.trajectory(&mean),
+            report: prior_mean_report.clone(),
+            prior_mean_report,
+            weights: mean,
+            samples: Vec::new(),
+            reason: Some(reason),
+        });
+    }
+    let solution = problem.solve(ctl)?;
+    let samples = if problem.extra_samples() > 0 {
+        problem.feasible_samples(problem.extra_samples(), ctl)?
+    } else {
+        Vec::new()
+    };
+    Ok(OptimizeResponse {
+        status: solution.status,
+        trajectory: problem.trajectory(&solution.weights),
+        mahalanobis: solution.mahalanobis,
+        weights: solution.weights,
+        report: solution.report,
+        prior_mean_report,
+        samples,
+        reason: solution.reason,
+    })
+}

@@ -1,0 +1,118 @@
+//! Optimiser benchmark: ≥ 100 generated typical problems (real-like prior,
+//! 10-obstacle berry cluster near the path, 150 samples, 2 cm clearance).
+//! Prints median / p99 solve time, iterations, QP sizes, status counts and
+//! peak RSS, then runs criterion on a few representative problems.
+//!
+//! `cargo bench --bench optim` (set `DPMP_BENCH_PROBLEMS` to change the
+//! number of problems, default 100).
+
+use criterion::{black_box, Criterion};
+use dpmp::optim::example::{typical_request, ExampleSettings};
+use dpmp::optim::{optimize, OptimizeRequest, SolveControl, Status};
+use dpmp::robot::Robot;
+use std::time::Instant;
+
+fn problems(robot: &Robot, n: usize) -> Vec<OptimizeRequest> {
+    let settings = ExampleSettings::default();
+    (0..n as u64)
+        .map(|seed| typical_request(robot, seed, &settings).expect("example request"))
+        .collect()
+}
+
+fn percentile(sorted: &[f64], p: f64) -> f64 {
+    let i = ((sorted.len() as f64 - 1.0) * p).round() as usize;
+    sorted[i.min(sorted.len() - 1)]
+}
+
+fn peak_rss_mb() -> f64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines().find(|l| l.starts_with("VmHWM:")).and_then(|l| {
+                l.split_whitespace()
+                    .nth(1)
+                    .and_then(|v| v.parse::<f64>().ok())
+            })
+        })
+        .map_or(f64::NAN, |kb| kb / 1024.0)
+}
+
+fn sweep(robot: &Robot, requests: &[OptimizeRequest]) {
+    let mut solve_ms = Vec::new();
+    let mut total_ms = Vec::new();
+    let mut iterations = Vec::new();
+    let mut rows = Vec::new();
+    let (mut optimal, mut infeasible, mut max_iter, mut mean_feasible) = (0, 0, 0, 0);
+    for req in requests {
+        let t0 = Instant::now();
+        let resp = optimize(req, robot).expect("optimize");
+        total_ms.push(t0.elapsed().as_secs_f64() * 1e3);
+        let problem = req.validate(robot).expect("validate");
+        if problem.is_feasible(&resp.prior_mean_report) {
+            mean_feasible += 1;
+        }
+        let t1 = Instant::now();
+        let sol = problem.solve(&SolveControl::default()).expect("solve");
+        solve_ms.push(t1.elapsed().as_secs_f64() * 1e3);
+        iterations.push(sol.stats.iterations as f64);
+        rows.push(sol.stats.max_qp_rows as f64);
+        match resp.status {
+            Status::Optimal => optimal += 1,
+            Status::Infeasible => infeasible += 1,
+            Status::MaxIterations => max_iter += 1,
+        }
+    }
+    for v in [&mut solve_ms, &mut total_ms, &mut iterations, &mut rows] {
+        v.sort_by(|a, b| a.total_cmp(b));
+    }
+    let n = requests.len();
+    println!("optim sweep over {n} typical problems (10 obstacles, 150 samples, clearance 0.02 m)");
+    println!(
+        "  status: optimal {optimal}, infeasible {infeasible}, max_iterations {max_iter}; prior mean already feasible: {mean_feasible}"
+    );
+    println!(
+        "  Problem::solve   median {:.2} ms  p99 {:.2} ms  max {:.2} ms",
+        percentile(&solve_ms, 0.5),
+        percentile(&solve_ms, 0.99),
+        solve_ms[n - 1]
+    );
+    println!(
+        "  optimize (validate + diagnose + solve + prior report)  median {:.2} ms  p99 {:.2} ms",
+        percentile(&total_ms, 0.5),
+        percentile(&total_ms, 0.99)
+    );
+    println!(
+        "  iterations median {} p99 {} max {}; largest QP rows median {} p99 {} max {} (variables = 56 + slacks)",
+        percentile(&iterations, 0.5),
+        percentile(&iterations, 0.99),
+        iterations[n - 1],
+        percentile(&rows, 0.5),
+        percentile(&rows, 0.99),
+        rows[n - 1]
+    );
+    println!("  peak RSS (VmHWM) {:.1} MB", peak_rss_mb());
+}
+
+fn main() {
+    let robot = Robot::panda().expect("panda");
+    let n = std::env::var("DPMP_BENCH_PROBLEMS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(100);
+    let requests = problems(&robot, n);
+    sweep(&robot, &requests);
+    let mut c = Criterion::default().sample_size(20).configure_from_args();
+    let solvable: Vec<_> = requests.iter().take(3).collect();
+    let validated: Vec<_> = solvable
+        .iter()
+        .map(|r| r.validate(&robot).expect("validate"))
+        .collect();
+    c.bench_function("optim/solve_typical_3", |b| {
+        b.iter(|| {
+            for p in &validated {
+                black_box(p.solve(&SolveControl::default()).expect("solve"));
+            }
+        })
+    });
+    c.final_summary();
+}

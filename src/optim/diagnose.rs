@@ -1,0 +1,133 @@
+//! Infeasibility diagnosis before solving: conditions that no trajectory
+//! can meet, each reported with the constraint it breaks.
+
+use super::problem::{Problem, FEASIBILITY_TOLERANCE};
+use crate::robot::{IkOptions, IkTarget};
+use nalgebra::{Point3, Vector3};
+
+impl Problem {
+    /// Why the problem is infeasible before any solve, if it evidently is:
+    /// start (or final configuration) outside the limits, start in
+    /// collision, goal inside an obstacle's clearance, goal beyond the
+    /// arm's reach, or inverse kinematics to the goal failing from several
+    /// seeds.
+    pub fn diagnose(&self) -> Option<String> {
+        if let Some(start) = &self.linear.start {
+            if let Some(r) = self.outside_limits("start", start) {
+                return Some(r);
+            }
+            if let Some(r) = self.start_collision(start) {
+                return Some(r);
+            }
+        }
+        if let Some(q) = &self.linear.final_configuration {
+            if let Some(r) = self.outside_limits("options.final_configuration", q) {
+                return Some(r);
+            }
+        }
+        self.goal_problem()
+    }
+
+    fn outside_limits(&self, field: &str, q: &[f64]) -> Option<String> {
+        let lin = &self.linear;
+        q.iter().enumerate().find_map(|(j, &v)| {
+            (v < lin.lower[j] - FEASIBILITY_TOLERANCE || v > lin.upper[j] + FEASIBILITY_TOLERANCE)
+                .then(|| {
+                    format!(
+                        "{field}[{j}] = {v:.4} rad is outside joint {} limits [{:.4}, {:.4}] (limits minus joint_limit_margin_rad)",
+                        self.robot.joint_names()[j],
+                        lin.lower[j],
+                        lin.upper[j]
+                    )
+                })
+        })
+    }
+
+    fn start_collision(&self, start: &[f64]) -> Option<String> {
+        let frames = self.robot.fk(start);
+        let c = self.scene.min_clearance(&self.robot, &frames)?;
+        (c.distance < self.clearance_m - FEASIBILITY_TOLERANCE).then(|| {
+            format!(
+                "start is in collision: link {} is {:.4} m from obstacle '{}' (clearance_m {:.4})",
+                c.link_name, c.distance, c.obstacle_id, self.clearance_m
+            )
+        })
+    }
+
+    fn goal_problem(&self) -> Option<String> {
+        let goal = self.goal.as_ref()?;
+        let p = Point3::from(goal.position);
+        if let Some(i) = self.scene.obstacle_containing(&p, self.clearance_m) {
+            return Some(format!(
+                "goal: obstacle '{}' covers the goal position (within clearance_m {:.4})",
+                self.scene.obstacles()[i].id,
+                self.clearance_m
+            ));
+        }
+        let (shoulder, reach) = self.reach_bound();
+        let distance = (p.coords - shoulder).norm();
+        if distance > reach + goal.tolerance_m {
+            return Some(format!(
+                "goal: out of reach, {distance:.3} m from the shoulder, the arm reaches at most {reach:.3} m"
+            ));
+        }
+        self.ik_failure(&p, goal.tolerance_m)
+    }
+
+    /// Shoulder position and an upper bound on the TCP's distance from it:
+    /// the sum of the constant distances between consecutive link origins
+    /// from the first moving link to the tip.
+    fn reach_bound(&self) -> (Vector3<f64>, f64) {
+        let frames = self.robot.fk(&self.robot.home());
+        let origins: Vec<Vector3<f64>> =
+            frames.poses.iter().map(|f| f.translation.vector).collect();
+        let first = origins.iter().position(|o| o.norm() > 1e-9).unwrap_or(0);
+        let shoulder = origins.get(first).copied().unwrap_or_else(Vector3::zeros);
+        let tip = self.robot.tcp_link().min(origins.len().saturating_sub(1));
+        let reach = (first..tip)
+            .map(|i| (origins[i + 1] - origins[i]).norm())
+            .sum();
+        (shoulder, reach)
+    }
+
+    /// Inverse kinematics from the prior mean's final configuration, the
+    /// start, home and mid-range; a reason when none reaches the goal.
+    fn ik_failure(&self, p: &Point3<f64>, tolerance: f64) -> Option<String> {
+        let mut seeds = vec![self.ends.position(1, &self.prior.mean)];
+        if let Some(s) = &self.linear.start {
+            seeds.push(s.clone());
+        }
+        seeds.push(self.robot.home());
+        seeds.push(
+            self.linear
+                .lower
+                .iter()
+                .zip(&self.linear.upper)
+                .map(|(l, u)| 0.5 * (l + u))
+                .collect(),
+        );
+        let target = IkTarget {
+            position: *p,
+            approach_axis: None,
+        };
+        let margin = self.linear.lower[0] - self.robot.limits()[0].lower;
+        let options = IkOptions {
+            tolerance_m: (0.5 * tolerance).min(1e-3),
+            limit_margin_rad: margin,
+            ..Default::default()
+        };
+        let mut best = f64::INFINITY;
+        for seed in &seeds {
+            if let Ok(sol) = self.robot.ik(&target, seed, &options) {
+                if sol.position_error_m <= tolerance {
+                    return None;
+                }
+                best = best.min(sol.position_error_m);
+            }
+        }
+        Some(format!(
+            "goal: out of reach, inverse kinematics found no configuration within the joint limits from {} seeds (best TCP error {best:.4} m)",
+            seeds.len()
+        ))
+    }
+}

@@ -1,0 +1,353 @@
+//! [`Problem`]: a validated, whitened request, ready to solve; built by
+//! [`OptimizeRequest::validate`].
+
+use super::linear::LinearSet;
+use super::phases::PhaseRows;
+use super::request::{
+    Goal, OptimizeRequest, PriorSpec, SolverOptions, MAX_DURATION_S, MAX_EXTRA_SAMPLES,
+    MAX_OBSTACLES, MAX_PHASE_SAMPLES,
+};
+use super::whiten::Whitening;
+use crate::promp::annotation::{prior_from_joints, REPAIR_FLOOR_RELATIVE};
+use crate::promp::{repair_covariance, Basis, WeightDistribution};
+use crate::robot::Robot;
+use crate::scene::Scene;
+use crate::{error::ensure_finite, Error, Result};
+use nalgebra::{DMatrix, DVector};
+
+/// Tolerance (m, rad, ratio) within which a constraint counts as satisfied.
+pub const FEASIBILITY_TOLERANCE: f64 = 1e-6;
+/// Default distance beyond `clearance_m` within which pairs are linearised.
+pub const DEFAULT_ACTIVATION_MARGIN_M: f64 = 0.05;
+
+/// A validated request: prior, whitening, robot, scene and constraints.
+/// `Clone + Send + Sync`; solving does not mutate it.
+#[derive(Clone, Debug)]
+pub struct Problem {
+    pub(crate) robot: Robot,
+    pub(crate) scene: Scene,
+    pub(crate) basis: Basis,
+    pub(crate) prior: WeightDistribution,
+    pub(crate) whitening: Whitening,
+    /// Optimisation phases (the request's grid).
+    pub(crate) grid: PhaseRows,
+    /// Phases 0 and 1 (start / final equalities, goal).
+    pub(crate) ends: PhaseRows,
+    /// Dense verification phases and their basis rows.
+    pub(crate) dense_phases: Vec<f64>,
+    pub(crate) dense_psi: DMatrix<f64>,
+    pub(crate) dense_dpsi: DMatrix<f64>,
+    pub(crate) linear: LinearSet,
+    pub(crate) clearance_m: f64,
+    pub(crate) activation_m: f64,
+    pub(crate) goal: Option<Goal>,
+    pub(crate) options: SolverOptions,
+    pub(crate) duration: f64,
+    pub(crate) n_extra_samples: usize,
+    pub(crate) warnings: Vec<String>,
+}
+
+impl OptimizeRequest {
+    /// Check every field against `robot` and build the whitened problem.
+    /// Errors name the JSON field (`prior.cov[3][4]`, `start[2]`,
+    /// `obstacles[1].radius`, `duration_s`, ...). An indefinite prior
+    /// covariance is repaired and reported as a warning.
+    pub fn validate(&self, robot: &Robot) -> Result<Problem> {
+        let mut warnings = Vec::new();
+        self.promp.validate().map_err(|e| e.within("promp"))?;
+        if self.promp.n_samples > MAX_PHASE_SAMPLES {
+            return Err(Error::invalid(
+                "promp.n_samples",
+                format!(
+                    "must be at most {MAX_PHASE_SAMPLES}, got {}",
+                    self.promp.n_samples
+                ),
+            ));
+        }
+        check_range("duration_s", self.duration_s, 1e-3, MAX_DURATION_S)?;
+        check_range("clearance_m", self.clearance_m, 0.0, 1.0)?;
+        check_range(
+            "joint_limit_margin_rad",
+            self.joint_limit_margin_rad,
+            0.0,
+            1.0,
+        )?;
+        if self.samples > MAX_EXTRA_SAMPLES {
+            return Err(Error::invalid(
+                "samples",
+                format!("must be at most {MAX_EXTRA_SAMPLES}, got {}", self.samples),
+            ));
+        }
+        if let Some(start) = &self.start {
+            robot.validate_configuration("start", start)?;
+        }
+        if let Some(goal) = &self.goal {
+            ensure_finite("goal.position", &goal.position)?;
+            check_range("goal.tolerance_m", goal.tolerance_m, 1e-6, 1.0)?;
+        }
+        if self.obstacles.len() > MAX_OBSTACLES {
+            return Err(Error::invalid(
+                "obstacles",
+                format!(
+                    "at most {MAX_OBSTACLES} obstacles, got {}",
+                    self.obstacles.len()
+                ),
+            ));
+        }
+        let scene = Scene::new(self.obstacles.clone())?;
+        let activation_m = validate_options(&self.options, self.clearance_m, robot)?;
+        let linear = joint_bounds(robot, self.joint_limit_margin_rad, self)?;
+        let prior =
+            prior_distribution(&self.prior, robot.dof(), self.promp.n_basis, &mut warnings)?;
+        let lambda = match self.options.lambda {
+            Some(l) => l,
+            None => Whitening::default_lambda(&prior),
+        };
+        let whitening = Whitening::new(&prior, lambda)?;
+        let basis = Basis::new(&self.promp)?;
+        let grid = PhaseRows::new(
+            &basis,
+            &whitening,
+            robot.dof(),
+            self.duration_s,
+            basis.phases(),
+        );
+        let ends = PhaseRows::new(
+            &basis,
+            &whitening,
+            robot.dof(),
+            self.duration_s,
+            &[0.0, 1.0],
+        );
+        let dense = basis.resampled(self.promp.n_samples * self.options.verify_factor)?;
+        Ok(Problem {
+            robot: robot.clone(),
+            scene,
+            dense_phases: dense.phases().to_vec(),
+            dense_psi: dense.matrix().clone(),
+            dense_dpsi: dense.derivative() / self.duration_s,
+            basis,
+            prior,
+            whitening,
+            grid,
+            ends,
+            linear,
+            clearance_m: self.clearance_m,
+            activation_m,
+            goal: self.goal.clone(),
+            options: self.options.clone(),
+            duration: self.duration_s,
+            n_extra_samples: self.samples,
+            warnings,
+        })
+    }
+}
+
+/// `value` must be finite and in `[lo, hi]`.
+fn check_range(field: &str, value: f64, lo: f64, hi: f64) -> Result<()> {
+    if value.is_finite() && value >= lo && value <= hi {
+        Ok(())
+    } else {
+        Err(Error::invalid(
+            field,
+            format!("must be a finite number in [{lo}, {hi}], got {value}"),
+        ))
+    }
+}
+
+/// Check the solver knobs; returns the activation distance.
+fn validate_options(o: &SolverOptions, clearance: f64, robot: &Robot) -> Result<f64> {
+    if let Some(l) = o.lambda {
+        check_range("options.lambda", l, 1e-15, 1e6)?;
+    }
+    if !(1..=1000).contains(&o.max_iterations) {
+        return Err(Error::invalid(
+            "options.max_iterations",
+            format!("must be in 1..=1000, got {}", o.max_iterations),
+        ));
+    }
+    if !(4..=32).contains(&o.verify_factor) {
+        return Err(Error::invalid(
+            "options.verify_factor",
+            format!("must be in 4..=32, got {}", o.verify_factor),
+        ));
+    }
+    check_range("options.trust_region", o.trust_region, 1e-6, 1e3)?;
+    check_range("options.penalty", o.penalty, 1e-3, 1e9)?;
+    check_range("options.qp_tolerance", o.qp_tolerance, 1e-12, 1e-3)?;
+    if let Some(q) = &o.final_configuration {
+        robot.validate_configuration("options.final_configuration", q)?;
+    }
+    let activation = o
+        .activation_distance_m
+        .unwrap_or(clearance + DEFAULT_ACTIVATION_MARGIN_M);
+    check_range("options.activation_distance_m", activation, clearance, 10.0)?;
+    Ok(activation)
+}
+
+/// Joint limits shrunk by the margin, plus the equalities.
+fn joint_bounds(robot: &Robot, margin: f64, req: &OptimizeRequest) -> Result<LinearSet> {
+    let limits = robot.limits();
+    for (j, l) in limits.iter().enumerate() {
+        if l.lower + margin >= l.upper - margin {
+            return Err(Error::invalid(
+                "joint_limit_margin_rad",
+                format!(
+                    "a margin of {margin} rad leaves no range for joint {} ({}..{})",
+                    j + 1,
+                    l.lower,
+                    l.upper
+                ),
+            ));
+        }
+    }
+    Ok(LinearSet {
+        lower: limits.iter().map(|l| l.lower + margin).collect(),
+        upper: limits.iter().map(|l| l.upper - margin).collect(),
+        velocity: limits.iter().map(|l| l.velocity).collect(),
+        start: req.start.clone(),
+        final_configuration: req.options.final_configuration.clone(),
+        bound_weights: req.options.bound_weights,
+    })
+}
+
+/// The prior as a (repaired) weight distribution over `dof x n_basis` weights.
+fn prior_distribution(
+    spec: &PriorSpec,
+    dof: usize,
+    n_basis: usize,
+    warnings: &mut Vec<String>,
+) -> Result<WeightDistribution> {
+    match spec {
+        PriorSpec::Full { mean, cov } => {
+            full_prior(mean, cov, dof, n_basis, warnings).map_err(|e| e.within("prior"))
+        }
+        PriorSpec::Annotation { annotation } => {
+            if annotation.len() != dof {
+                return Err(Error::invalid(
+                    "prior.annotation",
+                    format!("expected {dof} joints, got {}", annotation.len()),
+                ));
+            }
+            let prior =
+                prior_from_joints(annotation, n_basis).map_err(|e| e.within("prior.annotation"))?;
+            warnings.extend(prior.warnings);
+            Ok(prior.distribution)
+        }
+    }
+}
+
+fn full_prior(
+    mean: &[f64],
+    cov: &[Vec<f64>],
+    dof: usize,
+    n_basis: usize,
+    warnings: &mut Vec<String>,
+) -> Result<WeightDistribution> {
+    let n = dof * n_basis;
+    if mean.len() != n {
+        return Err(Error::invalid(
+            "mean",
+            format!(
+                "expected {n} numbers ({dof} joints x {n_basis} basis functions), got {}",
+                mean.len()
+            ),
+        ));
+    }
+    ensure_finite("mean", mean)?;
+    if cov.len() != n {
+        return Err(Error::invalid(
+            "cov",
+            format!("expected {n} rows, got {}", cov.len()),
+        ));
+    }
+    for (r, row) in cov.iter().enumerate() {
+        if row.len() != n {
+            return Err(Error::invalid(
+                format!("cov[{r}]"),
+                format!(
+                    "expected {n} numbers (the covariance must be square), got {}",
+                    row.len()
+                ),
+            ));
+        }
+        ensure_finite(&format!("cov[{r}]"), row)?;
+    }
+    let matrix = DMatrix::from_fn(n, n, |r, c| cov[r][c]);
+    let dist = WeightDistribution::new(DVector::from_column_slice(mean), matrix, dof, n_basis)?;
+    let scale = dist.cov.symmetric_eigenvalues().amax();
+    let (repaired, min_eig, changed) = repair_covariance(&dist.cov, REPAIR_FLOOR_RELATIVE * scale);
+    if changed {
+        warnings.push(format!(
+            "prior covariance is not positive semi-definite (min eigenvalue {min_eig:.3e}); eigenvalues clipped to {:.3e}",
+            REPAIR_FLOOR_RELATIVE * scale
+        ));
+    }
+    Ok(WeightDistribution {
+        cov: repaired,
+        ..dist
+    })
+}
+
+impl Problem {
+    /// The (repaired) prior.
+    pub fn prior(&self) -> &WeightDistribution {
+        &self.prior
+    }
+
+    /// The robot.
+    pub fn robot(&self) -> &Robot {
+        &self.robot
+    }
+
+    /// The scene.
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    /// The optimisation basis (the request's `promp`).
+    pub fn basis(&self) -> &Basis {
+        &self.basis
+    }
+
+    /// Motion duration (s).
+    pub fn duration(&self) -> f64 {
+        self.duration
+    }
+
+    /// Warnings raised while validating (covariance repairs).
+    pub fn warnings(&self) -> &[String] {
+        &self.warnings
+    }
+
+    /// Number of extra samples requested.
+    pub fn extra_samples(&self) -> usize {
+        self.n_extra_samples
+    }
+
+    /// Mahalanobis distance `sqrt((w-μ)ᵀ(Σ+λI)⁻¹(w-μ))`.
+    pub fn mahalanobis(&self, weights: &[f64]) -> f64 {
+        self.whitening
+            .mahalanobis(&DVector::from_column_slice(weights))
+    }
+
+    /// Whether every constraint in `report` holds to
+    /// [`FEASIBILITY_TOLERANCE`].
+    pub fn is_feasible(&self, report: &super::report::TrajectoryReport) -> bool {
+        let tol = FEASIBILITY_TOLERANCE;
+        let clear_ok = report
+            .min_clearance_m
+            .is_none_or(|d| d >= self.clearance_m - tol);
+        let goal_ok = match (&self.goal, report.goal_error_m) {
+            (Some(g), Some(e)) => e <= g.tolerance_m + tol,
+            (Some(_), None) => false,
+            (None, _) => true,
+        };
+        clear_ok
+            && goal_ok
+            && report.max_joint_limit_violation_rad <= tol
+            && report.max_velocity_ratio <= 1.0 + tol
+            && report.equality_error_rad <= tol
+            && report.weight_bound_excess <= tol
+    }
+}

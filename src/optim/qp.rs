@@ -1,0 +1,388 @@
+//! One convex subproblem in the whitened coordinates, solved by Clarabel.
+//!
+//! Variables `x = [z, s]`: the whitened weights and one non-negative slack
+//! per soft row. Objective `|z - c|² + Σ ρ_i s_i` (c = 0 when solving
+//! towards the prior mean, the whitened draw when projecting a sample).
+//! Rows: equalities (zero cone), hard and soft (slacked) inequalities
+//! `a·z ≤ b (+ s)`, second-order cones `|g0 + G z| ≤ r (+ s)` (the goal),
+//! and an optional trust-region box `|z - z_k|∞ ≤ Δ`. The constraint
+//! matrix is built column by column straight into Clarabel's CSC format.
+
+use crate::Error;
+use clarabel::algebra::CscMatrix;
+use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
+use nalgebra::{DMatrix, DVector};
+
+/// A row `a·z ≤ b`, with an L1-penalised slack when `penalty` is set.
+#[derive(Clone, Debug)]
+pub struct Inequality {
+    /// Coefficients on `z`.
+    pub a: DVector<f64>,
+    /// Right-hand side.
+    pub b: f64,
+    /// Weight of the slack in the objective, `None` for a hard row.
+    pub penalty: Option<f64>,
+}
+
+/// `|offset + matrix z| ≤ radius (+ s)`, slack weight `penalty`.
+#[derive(Clone, Debug)]
+pub struct Cone {
+    /// Constant part of the vector.
+    pub offset: DVector<f64>,
+    /// Linear part (`k x dim z`).
+    pub matrix: DMatrix<f64>,
+    /// Allowed norm.
+    pub radius: f64,
+    /// Weight of the slack in the objective.
+    pub penalty: f64,
+}
+
+/// Settings of each Clarabel solve.
+#[derive(Clone, Debug)]
+pub struct QpSettings {
+    /// Clarabel's gap and feasibility tolerances.
+    pub tolerance: f64,
+    /// Clarabel's iteration limit.
+    pub max_iterations: u32,
+    /// Seconds left before the caller's deadline (`None`: no limit).
+    pub time_limit: Option<f64>,
+}
+
+impl Default for QpSettings {
+    fn default() -> Self {
+        QpSettings {
+            tolerance: 1e-9,
+            max_iterations: 200,
+            time_limit: None,
+        }
+    }
+}
+
+/// A convex subproblem (see the module docs).
+#[derive(Clone, Debug, Default)]
+pub struct Qp {
+    /// Centre `c` of the cost `|z - c|²`.
+    pub center: DVector<f64>,
+    /// Equalities `a·z = b`.
+    pub equalities: Vec<(DVector<f64>, f64)>,
+    /// Inequalities.
+    pub inequalities: Vec<Inequality>,
+    /// Second-order cones.
+    pub cones: Vec<Cone>,
+    /// Trust region: centre and half-width of a box on `z`.
+    pub trust: Option<(DVector<f64>, f64)>,
+}
+
+/// What Clarabel returned.
+#[derive(Clone, Debug)]
+pub struct QpSolution {
+    /// Optimal `z`.
+    pub z: DVector<f64>,
+    /// Slack of each soft inequality (in `inequalities` order, 0 for hard rows).
+    pub inequality_slacks: Vec<f64>,
+    /// Slack of each cone.
+    pub cone_slacks: Vec<f64>,
+    /// Objective value `|z - c|² + Σ ρ s`.
+    pub objective: f64,
+    /// Multipliers of the equalities (Clarabel's sign convention).
+    pub equality_duals: Vec<f64>,
+    /// Multipliers of the inequalities (>= 0).
+    pub inequality_duals: Vec<f64>,
+    /// Number of rows of the constraint matrix.
+    pub rows: usize,
+    /// Number of variables.
+    pub variables: usize,
+}
+
+/// Outcome of a solve that did not produce a solution.
+#[derive(Clone, Debug, PartialEq)]
+pub enum QpFailure {
+    /// The hard rows cannot all hold.
+    Infeasible,
+    /// Clarabel stopped on its time limit.
+    OutOfTime,
+    /// Any other failure, with Clarabel's status.
+    Numerical(String),
+}
+
+impl QpFailure {
+    /// As a crate error.
+    pub fn into_error(self) -> Error {
+        match self {
+            QpFailure::Infeasible => {
+                Error::Infeasible("the hard constraints are incompatible".into())
+            }
+            QpFailure::OutOfTime => Error::Cancelled("QP ran past the deadline".into()),
+            QpFailure::Numerical(s) => Error::Numerical(format!("Clarabel: {s}")),
+        }
+    }
+}
+
+/// Column-wise builder of the constraint matrix.
+struct Columns {
+    cols: Vec<Vec<(usize, f64)>>,
+    b: Vec<f64>,
+}
+
+impl Columns {
+    fn row(&mut self, z_coeffs: &DVector<f64>, extra: &[(usize, f64)], b: f64) {
+        let r = self.b.len();
+        for (c, &v) in z_coeffs.iter().enumerate() {
+            if v != 0.0 {
+                self.cols[c].push((r, v));
+            }
+        }
+        for &(c, v) in extra {
+            self.cols[c].push((r, v));
+        }
+        self.b.push(b);
+    }
+
+    fn into_csc(self, m: usize) -> CscMatrix<f64> {
+        let n = self.cols.len();
+        let mut colptr = Vec::with_capacity(n + 1);
+        let nnz: usize = self.cols.iter().map(|c| c.len()).sum();
+        let mut rowval = Vec::with_capacity(nnz);
+        let mut nzval = Vec::with_capacity(nnz);
+        colptr.push(0);
+        for col in self.cols {
+            for (r, v) in col {
+                rowval.push(r);
+                nzval.push(v);
+            }
+            colptr.push(rowval.len());
+        }
+        CscMatrix::new(m, n, colptr, rowval, nzval)
+    }
+}
+
+impl Qp {
+    /// An empty problem over `dim` whitened coordinates, cost `|z|²`.
+    pub fn new(dim: usize) -> Qp {
+        Qp {
+            center: DVector::zeros(dim),
+            ..Default::default()
+        }
+    }
+
+    fn dim(&self) -> usize {
+        self.center.len()
+    }
+
+    /// Solve with Clarabel.
+    pub fn solve(&self, settings: &QpSettings) -> std::result::Result<QpSolution, QpFailure> {
+        let n_z = self.dim();
+        let soft: Vec<usize> = (0..self.inequalities.len())
+            .filter(|&i| self.inequalities[i].penalty.is_some())
+            .collect();
+        let n_s = soft.len() + self.cones.len();
+        let n = n_z + n_s;
+        // Slack index of each soft inequality and each cone.
+        let mut slack_of = vec![None; self.inequalities.len()];
+        for (k, &i) in soft.iter().enumerate() {
+            slack_of[i] = Some(n_z + k);
+        }
+        let cone_slack = |k: usize| n_z + soft.len() + k;
+
+        let mut q = vec![0.0; n];
+        for c in 0..n_z {
+            q[c] = -2.0 * self.center[c];
+        }
+        for (i, ineq) in self.inequalities.iter().enumerate() {
+            if let (Some(s), Some(rho)) = (slack_of[i], ineq.penalty) {
+                q[s] = rho;
+            }
+        }
+        for (k, cone) in self.cones.iter().enumerate() {
+            q[cone_slack(k)] = cone.penalty;
+        }
+
+        let mut cols = Columns {
+            cols: vec![Vec::new(); n],
+            b: Vec::new(),
+        };
+        let mut cones = Vec::new();
+        for (a, b) in &self.equalities {
+            cols.row(a, &[], *b);
+        }
+        if !self.equalities.is_empty() {
+            cones.push(SupportedConeT::ZeroConeT(self.equalities.len()));
+        }
+        let mut n_nonneg = 0;
+        for (i, ineq) in self.inequalities.iter().enumerate() {
+            match slack_of[i] {
+                Some(s) => cols.row(&ineq.a, &[(s, -1.0)], ineq.b),
+                None => cols.row(&ineq.a, &[], ineq.b),
+            }
+            n_nonneg += 1;
+        }
+        let empty = DVector::zeros(n_z);
+        for s in n_z..n {
+            cols.row(&empty, &[(s, -1.0)], 0.0);
+            n_nonneg += 1;
+        }
+        if let Some((centre, radius)) = &self.trust {
+            for c in 0..n_z {
+                let mut e = DVector::zeros(n_z);
+                e[c] = 1.0;
+                cols.row(&e, &[], centre[c] + radius);
+                e[c] = -1.0;
+                cols.row(&e, &[], radius - centre[c]);
+                n_nonneg += 2;
+            }
+        }
+        if n_nonneg > 0 {
+            cones.push(SupportedConeT::NonnegativeConeT(n_nonneg));
+        }
+        for (k, cone) in self.cones.iter().enumerate() {
+            // b - A x = (radius + s, offset + M z).
+            cols.row(&empty, &[(cone_slack(k), -1.0)], cone.radius);
+            for r in 0..cone.offset.len() {
+                let row = -cone.matrix.row(r).transpose();
+                cols.row(&row, &[], cone.offset[r]);
+            }
+            cones.push(SupportedConeT::SecondOrderConeT(1 + cone.offset.len()));
+        }
+        let b = cols.b.clone();
+        let m = b.len();
+        let a = cols.into_csc(m);
+        let p = cost_matrix(n_z, n);
+        let qp_settings = DefaultSettings {
+            verbose: false,
+            tol_gap_abs: settings.tolerance,
+            tol_gap_rel: settings.tolerance,
+            tol_feas: settings.tolerance,
+            max_iter: settings.max_iterations,
+            time_limit: settings.time_limit.unwrap_or(f64::INFINITY),
+            ..DefaultSettings::default()
+        };
+        let mut solver = DefaultSolver::new(&p, &q, &a, &b, &cones, qp_settings)
+            .map_err(|e| QpFailure::Numerical(format!("{e:?}")))?;
+        solver.solve();
+        let sol = &solver.solution;
+        match sol.status {
+            SolverStatus::Solved | SolverStatus::AlmostSolved => {}
+            SolverStatus::PrimalInfeasible | SolverStatus::AlmostPrimalInfeasible => {
+                return Err(QpFailure::Infeasible)
+            }
+            SolverStatus::MaxTime => return Err(QpFailure::OutOfTime),
+            other => return Err(QpFailure::Numerical(format!("{other:?}"))),
+        }
+        let x = &sol.x;
+        let z = DVector::from_column_slice(&x[..n_z]);
+        let inequality_slacks = slack_of
+            .iter()
+            .map(|s| s.map_or(0.0, |s| x[s].max(0.0)))
+            .collect();
+        let cone_slacks = (0..self.cones.len())
+            .map(|k| x[cone_slack(k)].max(0.0))
+            .collect();
+        let n_eq = self.equalities.len();
+        let objective =
+            (&z - &self.center).norm_squared() + (n_z..n).map(|i| q[i] * x[i]).sum::<f64>();
+        Ok(QpSolution {
+            z,
+            inequality_slacks,
+            cone_slacks,
+            objective,
+            equality_duals: sol.z[..n_eq].to_vec(),
+            inequality_duals: sol.z[n_eq..n_eq + self.inequalities.len()].to_vec(),
+            rows: m,
+            variables: n,
+        })
+    }
+}
+
+/// Upper triangle of `P = diag(2 I_z, 0_s)` (Clarabel minimises `½xᵀPx + qᵀx`).
+fn cost_matrix(n_z: usize, n: usize) -> CscMatrix<f64> {
+    let mut colptr = Vec::with_capacity(n + 1);
+    colptr.push(0);
+    for c in 0..n {
+        colptr.push((c + 1).min(n_z));
+    }
+    CscMatrix::new(n, n, colptr, (0..n_z).collect(), vec![2.0; n_z])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn unit(n: usize, i: usize, v: f64) -> DVector<f64> {
+        let mut e = DVector::zeros(n);
+        e[i] = v;
+        e
+    }
+
+    #[test]
+    fn projection_onto_a_halfspace_matches_the_closed_form() {
+        // min |z|² s.t. a·z >= 1  ->  z = a / |a|².
+        let a = DVector::from_vec(vec![1.0, 2.0, -2.0]);
+        let mut qp = Qp::new(3);
+        qp.inequalities.push(Inequality {
+            a: -&a,
+            b: -1.0,
+            penalty: None,
+        });
+        let sol = qp.solve(&QpSettings::default()).unwrap();
+        let expect = &a / a.norm_squared();
+        assert!((&sol.z - &expect).amax() < 1e-8);
+        assert!((sol.objective - expect.norm_squared()).abs() < 1e-8);
+        // KKT: 2z = μ a with μ >= 0.
+        let mu = sol.inequality_duals[0];
+        assert!((2.0 * &sol.z - &a * mu).amax() < 1e-6, "mu {mu}");
+    }
+
+    #[test]
+    fn equalities_cones_slacks_and_trust_region_behave() {
+        let n = 2;
+        // z0 = 1 exactly, z1 free, cost centre (0, 3), trust box around 0 width 2.
+        let mut qp = Qp::new(n);
+        qp.center = DVector::from_vec(vec![0.0, 3.0]);
+        qp.equalities.push((unit(n, 0, 1.0), 1.0));
+        qp.trust = Some((DVector::zeros(n), 2.0));
+        let sol = qp.solve(&QpSettings::default()).unwrap();
+        assert!((sol.z[0] - 1.0).abs() < 1e-8 && (sol.z[1] - 2.0).abs() < 1e-7);
+        // Soft row z1 <= -10 with a small penalty: slack takes the rest.
+        let mut qp = Qp::new(n);
+        qp.inequalities.push(Inequality {
+            a: unit(n, 1, 1.0),
+            b: -10.0,
+            penalty: Some(1.0),
+        });
+        let sol = qp.solve(&QpSettings::default()).unwrap();
+        // min z1² + s, s >= z1 + 10 -> z1 = -0.5, s = 9.5.
+        assert!((sol.z[1] + 0.5).abs() < 1e-6);
+        assert!((sol.inequality_slacks[0] - 9.5).abs() < 1e-6);
+        // Cone: |z - (3, 4)| <= 1 -> closest point to origin is 0.8 * (3, 4).
+        let mut qp = Qp::new(n);
+        qp.cones.push(Cone {
+            offset: DVector::from_vec(vec![-3.0, -4.0]),
+            matrix: DMatrix::identity(2, 2),
+            radius: 4.0,
+            penalty: 1e3,
+        });
+        let sol = qp.solve(&QpSettings::default()).unwrap();
+        assert!((sol.z[0] - 0.6).abs() < 1e-6 && (sol.z[1] - 0.8).abs() < 1e-6);
+        assert!(sol.cone_slacks[0] < 1e-7);
+    }
+
+    #[test]
+    fn incompatible_hard_rows_are_reported_infeasible() {
+        let n = 1;
+        let mut qp = Qp::new(n);
+        qp.inequalities.push(Inequality {
+            a: unit(n, 0, 1.0),
+            b: -1.0,
+            penalty: None,
+        });
+        qp.inequalities.push(Inequality {
+            a: unit(n, 0, -1.0),
+            b: -1.0,
+            penalty: None,
+        });
+        assert_eq!(
+            qp.solve(&QpSettings::default()).unwrap_err(),
+            QpFailure::Infeasible
+        );
+    }
+}

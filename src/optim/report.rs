@@ -1,0 +1,137 @@
+//! What the optimiser answers: the response, its ROS-shaped trajectory and
+//! the dense-verification report (field names are DESIGN.md's contract).
+
+use serde::Serialize;
+
+/// Outcome of a solve.
+#[derive(Clone, Copy, Debug, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum Status {
+    /// Every constraint holds under dense verification and the SCP converged.
+    Optimal,
+    /// A constraint cannot be met (see `reason`).
+    Infeasible,
+    /// Stopped by the iteration limit, the deadline or a cancel request
+    /// before converging (see `reason` and the warnings).
+    MaxIterations,
+}
+
+/// `trajectory_msgs/JointTrajectory` in JSON.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct JointTrajectory {
+    /// Actuated joints, base to tip.
+    pub joint_names: Vec<String>,
+    /// One point per phase of the request's sampling.
+    pub points: Vec<TrajectoryPoint>,
+}
+
+/// `trajectory_msgs/JointTrajectoryPoint` in JSON.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct TrajectoryPoint {
+    /// Joint positions (rad).
+    pub positions: Vec<f64>,
+    /// Joint velocities (rad/s).
+    pub velocities: Vec<f64>,
+    /// Seconds from the start of the motion.
+    pub time_from_start: f64,
+}
+
+/// The closest robot-obstacle pair over the verified trajectory.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct Closest {
+    /// Robot link name.
+    pub link: String,
+    /// Obstacle id.
+    pub obstacle: String,
+    /// Time of the closest approach (s).
+    pub time_s: f64,
+}
+
+/// Dense verification of one trajectory.
+///
+/// `solve_ms` is wall-clock time and is the only field that may differ
+/// between two runs of the same request.
+#[derive(Clone, Debug, Serialize, PartialEq, Default)]
+pub struct TrajectoryReport {
+    /// Smallest signed robot-obstacle distance (m); `None` without obstacles.
+    pub min_clearance_m: Option<f64>,
+    /// Where that distance occurs.
+    pub closest: Option<Closest>,
+    /// Largest excursion beyond the joint limits minus the requested margin
+    /// (rad, 0 when inside).
+    pub max_joint_limit_violation_rad: f64,
+    /// Largest `|dq/dt| / v_max` over joints and time.
+    pub max_velocity_ratio: f64,
+    /// TCP distance to the goal at the end (m); `None` without a goal.
+    pub goal_error_m: Option<f64>,
+    /// SCP iterations (QPs solved) that produced this trajectory.
+    pub iterations: usize,
+    /// Wall-clock solve time (ms); not deterministic.
+    pub solve_ms: f64,
+    /// Number of phases checked.
+    pub verified_samples: usize,
+    /// Non-fatal notes (repairs, stops, screening).
+    pub warnings: Vec<String>,
+    /// Largest start / final configuration error (rad); not serialised
+    /// (the contract has no such field) but checked by `is_feasible`.
+    #[serde(skip)]
+    pub equality_error_rad: f64,
+    /// Largest opt-in weight-bound excess; not serialised.
+    #[serde(skip)]
+    pub weight_bound_excess: f64,
+}
+
+/// One extra feasible trajectory (`samples: N`).
+#[derive(Clone, Debug, Serialize)]
+pub struct SampleResult {
+    /// Status of the projection of this draw.
+    pub status: Status,
+    /// Projected weights.
+    pub weights: Vec<f64>,
+    /// Mahalanobis distance of the projected weights to the prior.
+    pub mahalanobis: f64,
+    /// Mahalanobis distance between the draw and its projection.
+    pub distance_to_draw: f64,
+    /// The projected trajectory.
+    pub trajectory: JointTrajectory,
+    /// Its dense verification.
+    pub report: TrajectoryReport,
+}
+
+/// The answer to an optimise request.
+#[derive(Clone, Debug, Serialize)]
+pub struct OptimizeResponse {
+    /// Outcome.
+    pub status: Status,
+    /// Optimised weights, joint-major (the prior mean when infeasible
+    /// before solving).
+    pub weights: Vec<f64>,
+    /// Mahalanobis distance of `weights` to the prior.
+    pub mahalanobis: f64,
+    /// The trajectory of `weights`.
+    pub trajectory: JointTrajectory,
+    /// Dense verification of `weights`.
+    pub report: TrajectoryReport,
+    /// Dense verification of the prior mean.
+    pub prior_mean_report: TrajectoryReport,
+    /// Extra feasible trajectories (`samples: N`).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub samples: Vec<SampleResult>,
+    /// Why the status is not `optimal`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
+}
+
+impl OptimizeResponse {
+    /// The response as JSON with every `solve_ms` set to 0: identical bytes
+    /// for identical requests (used by the determinism tests).
+    pub fn deterministic_json(&self) -> String {
+        let mut copy = self.clone();
+        copy.report.solve_ms = 0.0;
+        copy.prior_mean_report.solve_ms = 0.0;
+        for s in &mut copy.samples {
+            s.report.solve_ms = 0.0;
+        }
+        serde_json::to_string(&copy).unwrap_or_default()
+    }
+}

@@ -1,0 +1,137 @@
+//! The optimise request (DESIGN.md's JSON contract) and its solver knobs.
+
+use crate::promp::annotation::JointAnnotation;
+use crate::promp::PrompConfig;
+use crate::scene::Obstacle;
+use serde::{Deserialize, Serialize};
+
+/// Largest accepted number of obstacles.
+pub const MAX_OBSTACLES: usize = 1000;
+/// Largest accepted `samples`.
+pub const MAX_EXTRA_SAMPLES: usize = 100;
+/// Largest accepted `promp.n_samples`.
+pub const MAX_PHASE_SAMPLES: usize = 2000;
+/// Largest accepted `duration_s`.
+pub const MAX_DURATION_S: f64 = 600.0;
+
+/// An optimise request (`POST /v1/optimize`, `dpmp optimize`).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OptimizeRequest {
+    /// The prior over the weights.
+    pub prior: PriorSpec,
+    /// Basis settings (`n_basis` must match the prior).
+    #[serde(default)]
+    pub promp: PrompConfig,
+    /// Duration of the motion (s), for the velocity limits and timestamps.
+    #[serde(default = "default_duration")]
+    pub duration_s: f64,
+    /// Required configuration at t = 0.
+    #[serde(default)]
+    pub start: Option<Vec<f64>>,
+    /// Required TCP position at the end.
+    #[serde(default)]
+    pub goal: Option<Goal>,
+    /// The scene.
+    #[serde(default)]
+    pub obstacles: Vec<Obstacle>,
+    /// Required robot-obstacle clearance (m).
+    #[serde(default = "default_clearance")]
+    pub clearance_m: f64,
+    /// Margin kept inside each joint limit (rad).
+    #[serde(default)]
+    pub joint_limit_margin_rad: f64,
+    /// Number of extra feasible trajectories to return.
+    #[serde(default)]
+    pub samples: usize,
+    /// Solver knobs.
+    #[serde(default)]
+    pub options: SolverOptions,
+}
+
+fn default_duration() -> f64 {
+    4.0
+}
+fn default_clearance() -> f64 {
+    0.02
+}
+fn default_tolerance() -> f64 {
+    0.01
+}
+
+/// The prior: a full Gaussian or the paper's per-joint annotation.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum PriorSpec {
+    /// `{"mean": [...], "cov": [[...]]}`, joint-major.
+    Full {
+        /// Mean weights.
+        mean: Vec<f64>,
+        /// Covariance rows.
+        cov: Vec<Vec<f64>>,
+    },
+    /// `{"annotation": [7 x {"mean_weights", "L"}]}`.
+    Annotation {
+        /// One entry per joint.
+        annotation: Vec<JointAnnotation>,
+    },
+}
+
+/// Goal: TCP position at the end of the motion.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Goal {
+    /// Target TCP position in the base frame (m).
+    pub position: [f64; 3],
+    /// Allowed distance (m).
+    #[serde(default = "default_tolerance")]
+    pub tolerance_m: f64,
+}
+
+/// Solver knobs; every field is optional in JSON.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct SolverOptions {
+    /// Whitening regularisation `λ` in `Σ + λI` (default: 1e-6 x the mean
+    /// prior variance).
+    pub lambda: Option<f64>,
+    /// Largest number of SCP iterations (QPs).
+    pub max_iterations: usize,
+    /// Robot-obstacle pairs closer than this (m) are linearised (default:
+    /// `clearance_m + 0.05`); must be >= `clearance_m`.
+    pub activation_distance_m: Option<f64>,
+    /// Dense verification samples per optimisation sample (>= 4).
+    pub verify_factor: usize,
+    /// Seed of the prior draws for `samples`.
+    pub seed: u64,
+    /// Opt-in: also bound every weight by its joint's limits (guarantees
+    /// the limits at every phase, but real priors' weights lie far outside
+    /// the limits, so this usually makes them infeasible).
+    pub bound_weights: bool,
+    /// Initial trust-region half-width on the whitened weights.
+    pub trust_region: f64,
+    /// Initial L1 penalty on constraint slacks.
+    pub penalty: f64,
+    /// Clarabel's tolerances.
+    pub qp_tolerance: f64,
+    /// Optional final configuration as an equality (for conditioning-style
+    /// requests and tests).
+    pub final_configuration: Option<Vec<f64>>,
+}
+
+impl Default for SolverOptions {
+    fn default() -> Self {
+        SolverOptions {
+            lambda: None,
+            max_iterations: 60,
+            activation_distance_m: None,
+            verify_factor: 4,
+            seed: 0,
+            bound_weights: false,
+            trust_region: 1.0,
+            penalty: 1e3,
+            qp_tolerance: 1e-9,
+            final_configuration: None,
+        }
+    }
+}

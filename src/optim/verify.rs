@@ -1,0 +1,208 @@
+//! Dense verification: every constraint evaluated at `verify_factor` times
+//! the optimisation sampling, with real forward kinematics and parry3d
+//! distances. The report the user sees always comes from here.
+
+use super::problem::{Problem, FEASIBILITY_TOLERANCE};
+use super::report::{Closest, JointTrajectory, TrajectoryPoint, TrajectoryReport};
+use crate::scene::Clearance;
+use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
+
+/// A dense check: the report plus the phases where something is violated.
+#[derive(Clone, Debug)]
+pub struct Verification {
+    /// Figures over the dense phases.
+    pub report: TrajectoryReport,
+    /// Dense phases with a violated limit, velocity or clearance.
+    pub flagged: Vec<f64>,
+}
+
+impl Problem {
+    /// `n_basis x n_joints` weight matrix of joint-major `w`.
+    pub(crate) fn weight_matrix(&self, w: &DVector<f64>) -> DMatrix<f64> {
+        let nb = self.prior.n_basis;
+        DMatrix::from_fn(nb, self.prior.n_joints, |i, j| w[j * nb + i])
+    }
+
+    /// Dense verification of any candidate weights (length must be the
+    /// prior's dimension; other lengths give an all-violated report).
+    pub fn evaluate(&self, weights: &[f64]) -> TrajectoryReport {
+        self.verify(&DVector::from_column_slice(weights)).report
+    }
+
+    /// Dense verification with the violated phases.
+    pub fn verify(&self, w: &DVector<f64>) -> Verification {
+        if w.len() != self.prior.dim() || w.iter().any(|v| !v.is_finite()) {
+            return Verification {
+                report: TrajectoryReport {
+                    max_joint_limit_violation_rad: f64::INFINITY,
+                    max_velocity_ratio: f64::INFINITY,
+                    warnings: vec!["weights have the wrong length or are not finite".into()],
+                    ..Default::default()
+                },
+                flagged: Vec::new(),
+            };
+        }
+        let wm = self.weight_matrix(w);
+        let q = &self.dense_psi * &wm;
+        let qd = &self.dense_dpsi * &wm;
+        let mut flagged = vec![false; self.dense_phases.len()];
+        let limit = self.limit_violation(&q, &mut flagged);
+        let ratio = self.velocity_ratio(&qd, &mut flagged);
+        let (min_clearance, closest) = self.dense_clearance(&q, &mut flagged);
+        let report = TrajectoryReport {
+            min_clearance_m: min_clearance,
+            closest,
+            max_joint_limit_violation_rad: limit,
+            max_velocity_ratio: ratio,
+            goal_error_m: self.goal_error(w),
+            verified_samples: self.dense_phases.len(),
+            equality_error_rad: self.linear.equality_error(&self.ends, w),
+            weight_bound_excess: self
+                .linear
+                .weight_bound_excess(w, self.prior.n_basis)
+                .max(0.0),
+            ..Default::default()
+        };
+        let flagged = flagged
+            .iter()
+            .zip(&self.dense_phases)
+            .filter(|(f, _)| **f)
+            .map(|(_, p)| *p)
+            .collect();
+        Verification { report, flagged }
+    }
+
+    fn limit_violation(&self, q: &DMatrix<f64>, flagged: &mut [bool]) -> f64 {
+        let mut worst: f64 = 0.0;
+        for (p, flag) in flagged.iter_mut().enumerate() {
+            for j in 0..q.ncols() {
+                let v = q[(p, j)];
+                let excess = (v - self.linear.upper[j]).max(self.linear.lower[j] - v);
+                if excess > FEASIBILITY_TOLERANCE {
+                    *flag = true;
+                }
+                worst = worst.max(excess);
+            }
+        }
+        worst
+    }
+
+    fn velocity_ratio(&self, qd: &DMatrix<f64>, flagged: &mut [bool]) -> f64 {
+        let mut worst: f64 = 0.0;
+        for (p, flag) in flagged.iter_mut().enumerate() {
+            for j in 0..qd.ncols() {
+                let ratio = qd[(p, j)].abs() / self.linear.velocity[j];
+                if ratio > 1.0 + FEASIBILITY_TOLERANCE {
+                    *flag = true;
+                }
+                worst = worst.max(ratio);
+            }
+        }
+        worst
+    }
+
+    /// Closest pair per dense phase (pairs within the activation distance
+    /// via the broad phase; the exact minimum when nothing is that close).
+    fn dense_clearance(
+        &self,
+        q: &DMatrix<f64>,
+        flagged: &mut [bool],
+    ) -> (Option<f64>, Option<Closest>) {
+        if self.scene.is_empty() {
+            return (None, None);
+        }
+        let rows: Vec<Vec<f64>> = (0..q.nrows())
+            .map(|p| q.row(p).iter().cloned().collect())
+            .collect();
+        let near: Vec<Option<Clearance>> = rows
+            .par_iter()
+            .map(|qp| {
+                let frames = self.robot.fk(qp);
+                closest_of(
+                    self.scene
+                        .clearances_within(&self.robot, &frames, self.activation_m),
+                )
+            })
+            .collect();
+        let per_phase: Vec<Option<Clearance>> = if near.iter().any(|c| c.is_some()) {
+            near
+        } else {
+            rows.par_iter()
+                .map(|qp| {
+                    let frames = self.robot.fk(qp);
+                    self.scene.min_clearance(&self.robot, &frames)
+                })
+                .collect()
+        };
+        let mut best: Option<(usize, &Clearance)> = None;
+        for (p, c) in per_phase.iter().enumerate() {
+            if let Some(c) = c {
+                if c.distance < self.clearance_m - FEASIBILITY_TOLERANCE {
+                    flagged[p] = true;
+                }
+                if best.is_none_or(|(_, b)| c.distance < b.distance) {
+                    best = Some((p, c));
+                }
+            }
+        }
+        match best {
+            None => (None, None),
+            Some((p, c)) => (
+                Some(c.distance),
+                Some(Closest {
+                    link: c.link_name.clone(),
+                    obstacle: c.obstacle_id.clone(),
+                    time_s: self.dense_phases[p] * self.duration,
+                }),
+            ),
+        }
+    }
+
+    /// TCP distance to the goal at phase 1.
+    pub(crate) fn goal_error(&self, w: &DVector<f64>) -> Option<f64> {
+        let goal = self.goal.as_ref()?;
+        let q = self.ends.position(1, w);
+        let p = self.robot.tcp_pose(&q).translation.vector;
+        Some(
+            ((p.x - goal.position[0]).powi(2)
+                + (p.y - goal.position[1]).powi(2)
+                + (p.z - goal.position[2]).powi(2))
+            .sqrt(),
+        )
+    }
+
+    /// The trajectory of `w` on the request's grid, ROS-shaped.
+    pub fn trajectory(&self, weights: &[f64]) -> JointTrajectory {
+        let w = DVector::from_column_slice(weights);
+        let wm = self.weight_matrix(&w);
+        let q = self.basis.matrix() * &wm;
+        let qd = self.basis.derivative() * &wm / self.duration;
+        let points = self
+            .basis
+            .phases()
+            .iter()
+            .enumerate()
+            .map(|(p, z)| TrajectoryPoint {
+                positions: q.row(p).iter().cloned().collect(),
+                velocities: qd.row(p).iter().cloned().collect(),
+                time_from_start: z * self.duration,
+            })
+            .collect();
+        JointTrajectory {
+            joint_names: self.robot.joint_names().to_vec(),
+            points,
+        }
+    }
+}
+
+/// The smallest-distance clearance of a list (first on ties).
+pub(crate) fn closest_of(list: Vec<Clearance>) -> Option<Clearance> {
+    let mut best: Option<Clearance> = None;
+    for c in list {
+        if best.as_ref().is_none_or(|b| c.distance < b.distance) {
+            best = Some(c);
+        }
+    }
+    best
+}

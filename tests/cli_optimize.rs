@@ -1,0 +1,79 @@
+//! `dpmp optimize` end to end: JSON out, plot file, exit codes.
+
+use dpmp::optim::example::{typical_request, ExampleSettings};
+use dpmp::robot::Robot;
+use std::process::Command;
+
+fn write_request(
+    dir: &std::path::Path,
+    mutate: impl Fn(&mut serde_json::Value),
+) -> std::path::PathBuf {
+    let robot = Robot::panda().unwrap();
+    let settings = ExampleSettings {
+        n_obstacles: 3,
+        ..Default::default()
+    };
+    let req = typical_request(&robot, 11, &settings).unwrap();
+    let mut json = serde_json::to_value(&req).unwrap();
+    mutate(&mut json);
+    let path = dir.join("request.json");
+    std::fs::write(&path, serde_json::to_string(&json).unwrap()).unwrap();
+    path
+}
+
+#[test]
+fn optimize_prints_the_response_and_draws_the_plot() {
+    let dir = tempfile::tempdir().unwrap();
+    let req = write_request(dir.path(), |_| {});
+    let plot = dir.path().join("joints.png");
+    let out = Command::new(env!("CARGO_BIN_EXE_dpmp"))
+        .args(["optimize", "--request"])
+        .arg(&req)
+        .arg("--plot")
+        .arg(&plot)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let resp: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(["optimal", "infeasible", "max_iterations"].contains(&resp["status"].as_str().unwrap()));
+    assert_eq!(resp["weights"].as_array().unwrap().len(), 56);
+    assert_eq!(resp["trajectory"]["points"].as_array().unwrap().len(), 150);
+    assert_eq!(resp["report"]["verified_samples"], 600);
+    assert!(std::fs::metadata(&plot).unwrap().len() > 10_000);
+}
+
+#[test]
+fn invalid_input_exits_2_and_names_file_and_field() {
+    let dir = tempfile::tempdir().unwrap();
+    let req = write_request(dir.path(), |j| j["clearance_m"] = serde_json::json!(-1.0));
+    let out = Command::new(env!("CARGO_BIN_EXE_dpmp"))
+        .args(["optimize", "--request"])
+        .arg(&req)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("clearance_m") && err.contains("request.json"),
+        "{err}"
+    );
+    let req = write_request(dir.path(), |j| j["unknown_field"] = serde_json::json!(1));
+    let out = Command::new(env!("CARGO_BIN_EXE_dpmp"))
+        .args(["optimize", "--request"])
+        .arg(&req)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("unknown_field"));
+    let out = Command::new(env!("CARGO_BIN_EXE_dpmp"))
+        .args(["optimize", "--request"])
+        .arg(&req)
+        .args(["--plot", "x.gif"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+}

@@ -1,0 +1,133 @@
+//! Closed forms and optimality: the equality-only optimum is Gaussian
+//! conditioning, and convex instances agree with a tightly solved re-run.
+
+use dpmp::optim::example::{typical_request, ExampleSettings};
+use dpmp::optim::whiten::Whitening;
+use dpmp::optim::{OptimizeRequest, SolveControl, Status};
+use dpmp::promp::{ViaPoint, WeightDistribution};
+use dpmp::robot::Robot;
+use nalgebra::DMatrix;
+
+fn convex_request(seed: u64) -> (Robot, OptimizeRequest) {
+    let robot = Robot::panda().unwrap();
+    let settings = ExampleSettings {
+        n_obstacles: 0,
+        with_goal: false,
+        with_start: false,
+        ..Default::default()
+    };
+    let req = typical_request(&robot, seed, &settings).unwrap();
+    (robot, req)
+}
+
+#[test]
+fn equality_only_optimum_is_gaussian_conditioning() {
+    let (robot, mut req) = convex_request(3);
+    let base = req.validate(&robot).unwrap();
+    let mean = base.prior().trajectory_mean(base.basis());
+    let t = mean.nrows() - 1;
+    let start: Vec<f64> = (0..7)
+        .map(|j| mean[(0, j)] + 0.01 * (j as f64 - 3.0))
+        .collect();
+    let fin: Vec<f64> = (0..7)
+        .map(|j| mean[(t, j)] - 0.02 + 0.005 * j as f64)
+        .collect();
+    req.start = Some(start.clone());
+    req.options.final_configuration = Some(fin.clone());
+    let problem = req.validate(&robot).unwrap();
+    let sol = problem.solve(&SolveControl::default()).unwrap();
+    assert_eq!(sol.status, Status::Optimal, "{:?}", sol.reason);
+
+    let prior = problem.prior();
+    let n = prior.dim();
+    let lambda = Whitening::default_lambda(prior);
+    let shifted = WeightDistribution::new(
+        prior.mean.clone(),
+        &prior.cov + DMatrix::identity(n, n) * lambda,
+        7,
+        8,
+    )
+    .unwrap();
+    let post = shifted
+        .condition(
+            problem.basis(),
+            &[
+                ViaPoint {
+                    phase: 0.0,
+                    q: start,
+                    noise_var: 0.0,
+                },
+                ViaPoint {
+                    phase: 1.0,
+                    q: fin,
+                    noise_var: 0.0,
+                },
+            ],
+        )
+        .unwrap();
+    let diff = sol
+        .weights
+        .iter()
+        .zip(post.mean.iter())
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
+    assert!(diff < 1e-8, "weights differ from conditioning by {diff:e}");
+    let m_post = problem.mahalanobis(post.mean.as_slice());
+    assert!(
+        (sol.mahalanobis - m_post).abs() < 1e-8,
+        "{} vs {m_post}",
+        sol.mahalanobis
+    );
+}
+
+#[test]
+fn binding_limits_agree_with_a_tightly_solved_rerun_and_cost_more_than_equalities_alone() {
+    let (robot, mut req) = convex_request(5);
+    // Joint 6's prior reaches ~3.24 rad: a 0.55 rad margin makes its limit bind.
+    req.joint_limit_margin_rad = 0.55;
+    let problem = req.validate(&robot).unwrap();
+    let prior_report = problem.evaluate(problem.prior().mean.as_slice());
+    assert!(prior_report.max_joint_limit_violation_rad > 0.01);
+    let sol = problem.solve(&SolveControl::default()).unwrap();
+    assert_eq!(sol.status, Status::Optimal, "{:?}", sol.reason);
+    assert!(problem.is_feasible(&sol.report));
+    assert!(sol.mahalanobis > 0.0);
+
+    let mut tight = req.clone();
+    tight.options.qp_tolerance = 1e-11;
+    let tight_problem = tight.validate(&robot).unwrap();
+    let tight_sol = tight_problem.solve(&SolveControl::default()).unwrap();
+    assert_eq!(tight_sol.status, Status::Optimal);
+    assert!((sol.mahalanobis - tight_sol.mahalanobis).abs() < 1e-6 * (1.0 + sol.mahalanobis));
+    let q = problem.trajectory(&sol.weights);
+    let qt = tight_problem.trajectory(&tight_sol.weights);
+    for (a, b) in q.points.iter().zip(&qt.points) {
+        for (x, y) in a.positions.iter().zip(&b.positions) {
+            assert!((x - y).abs() < 1e-5, "{x} vs {y}");
+        }
+    }
+    // Convexity: feasible perturbations of the optimum never cost less.
+    let prior = problem.prior();
+    let mut rng = 12345u64;
+    let mut feasible_seen = 0;
+    for _ in 0..40 {
+        let w: Vec<f64> = sol
+            .weights
+            .iter()
+            .enumerate()
+            .map(|(i, s)| {
+                rng = rng
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                let u = (rng >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+                s + 0.02 * u * prior.cov[(i, i)].sqrt()
+            })
+            .collect();
+        let report = problem.evaluate(&w);
+        if problem.is_feasible(&report) {
+            feasible_seen += 1;
+            assert!(problem.mahalanobis(&w) >= sol.mahalanobis - 1e-9);
+        }
+    }
+    assert!(feasible_seen > 0);
+}

@@ -1,0 +1,276 @@
+//! Request handling: field-naming validation errors, infeasibility
+//! diagnoses, the annotation prior with repair, samples, determinism and
+//! cancellation.
+
+use dpmp::optim::example::{typical_request, ExampleSettings};
+use dpmp::optim::{optimize, optimize_with, OptimizeRequest, PriorSpec, SolveControl, Status};
+use dpmp::promp::annotation::joints_from_distribution;
+use dpmp::promp::codec::{decode_covariance, encode_covariance, DiagEncoding};
+use dpmp::robot::Robot;
+use dpmp::scene::{Obstacle, ObstacleShape};
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+
+fn request(seed: u64, n_obstacles: usize) -> (Robot, OptimizeRequest) {
+    let robot = Robot::panda().unwrap();
+    let settings = ExampleSettings {
+        n_obstacles,
+        ..Default::default()
+    };
+    let req = typical_request(&robot, seed, &settings).unwrap();
+    (robot, req)
+}
+
+fn field_of(req: &OptimizeRequest, robot: &Robot) -> String {
+    req.validate(robot)
+        .err()
+        .and_then(|e| e.field().map(str::to_string))
+        .unwrap_or_default()
+}
+
+#[test]
+fn bad_input_names_the_field() {
+    let (robot, base) = request(1, 2);
+    let mut r = base.clone();
+    if let PriorSpec::Full { cov, .. } = &mut r.prior {
+        cov[3][4] = f64::NAN;
+    }
+    assert_eq!(field_of(&r, &robot), "prior.cov[3][4]");
+    let mut r = base.clone();
+    if let PriorSpec::Full { cov, .. } = &mut r.prior {
+        cov[5].pop();
+    }
+    assert_eq!(field_of(&r, &robot), "prior.cov[5]");
+    let mut r = base.clone();
+    if let PriorSpec::Full { cov, .. } = &mut r.prior {
+        cov.pop();
+    }
+    assert_eq!(field_of(&r, &robot), "prior.cov");
+    let mut r = base.clone();
+    if let PriorSpec::Full { mean, .. } = &mut r.prior {
+        mean.push(0.0);
+    }
+    assert_eq!(field_of(&r, &robot), "prior.mean");
+    let mut r = base.clone();
+    if let PriorSpec::Full { cov, .. } = &mut r.prior {
+        cov[4][3] += 1.0;
+    }
+    assert_eq!(field_of(&r, &robot), "prior.cov[4][3]");
+    let mut r = base.clone();
+    r.start = Some(vec![0.0; 6]);
+    assert_eq!(field_of(&r, &robot), "start");
+    let mut r = base.clone();
+    r.start.as_mut().unwrap()[2] = f64::INFINITY;
+    assert_eq!(field_of(&r, &robot), "start[2]");
+    let mut r = base.clone();
+    r.duration_s = -1.0;
+    assert_eq!(field_of(&r, &robot), "duration_s");
+    let mut r = base.clone();
+    r.clearance_m = -0.01;
+    assert_eq!(field_of(&r, &robot), "clearance_m");
+    let mut r = base.clone();
+    r.joint_limit_margin_rad = 2.0;
+    assert_eq!(field_of(&r, &robot), "joint_limit_margin_rad");
+    let mut r = base.clone();
+    r.samples = 1000;
+    assert_eq!(field_of(&r, &robot), "samples");
+    let mut r = base.clone();
+    r.promp.n_samples = 5000;
+    assert_eq!(field_of(&r, &robot), "promp.n_samples");
+    let mut r = base.clone();
+    r.promp.n_basis = 6;
+    assert_eq!(field_of(&r, &robot), "prior.mean");
+    let mut r = base.clone();
+    r.goal.as_mut().unwrap().tolerance_m = 0.0;
+    assert_eq!(field_of(&r, &robot), "goal.tolerance_m");
+    let mut r = base.clone();
+    r.goal.as_mut().unwrap().position[1] = f64::NAN;
+    assert_eq!(field_of(&r, &robot), "goal.position[1]");
+    let mut r = base.clone();
+    r.options.verify_factor = 2;
+    assert_eq!(field_of(&r, &robot), "options.verify_factor");
+    let mut r = base.clone();
+    r.options.activation_distance_m = Some(0.001);
+    assert_eq!(field_of(&r, &robot), "options.activation_distance_m");
+    let mut r = base.clone();
+    if let ObstacleShape::Sphere { radius, .. } = &mut r.obstacles[0].shape {
+        *radius = -1.0;
+    }
+    assert!(
+        field_of(&r, &robot).starts_with("obstacles[0]"),
+        "{}",
+        field_of(&r, &robot)
+    );
+    // Unknown fields and malformed JSON are rejected by serde.
+    let json = serde_json::to_value(&base).unwrap();
+    let mut extra = json.clone();
+    extra["bogus"] = serde_json::json!(1);
+    assert!(serde_json::from_value::<OptimizeRequest>(extra).is_err());
+    let mut extra = json.clone();
+    extra["options"]["bogus"] = serde_json::json!(1);
+    assert!(serde_json::from_value::<OptimizeRequest>(extra).is_err());
+    // Defaults from DESIGN.md.
+    let minimal: OptimizeRequest =
+        serde_json::from_value(serde_json::json!({"prior": json["prior"].clone()})).unwrap();
+    assert_eq!(minimal.duration_s, 4.0);
+    assert_eq!(minimal.clearance_m, 0.02);
+    assert_eq!(minimal.promp.n_samples, 150);
+    assert!(minimal.validate(&robot).is_ok());
+}
+
+#[test]
+fn infeasible_cases_are_diagnosed_with_the_constraint() {
+    let (robot, base) = request(2, 3);
+    // Start outside the joint limits.
+    let mut r = base.clone();
+    r.start.as_mut().unwrap()[3] = 0.5;
+    let resp = optimize(&r, &robot).unwrap();
+    assert_eq!(resp.status, Status::Infeasible);
+    assert!(
+        resp.reason.as_deref().unwrap().contains("start[3]"),
+        "{:?}",
+        resp.reason
+    );
+    // Start in collision: a sphere on the start TCP.
+    let mut r = base.clone();
+    let tcp = robot.tcp_pose(r.start.as_ref().unwrap()).translation.vector;
+    r.obstacles.push(Obstacle {
+        id: "blocker".into(),
+        shape: ObstacleShape::Sphere {
+            center: tcp.into(),
+            radius: 0.03,
+        },
+    });
+    let resp = optimize(&r, &robot).unwrap();
+    assert_eq!(resp.status, Status::Infeasible);
+    let reason = resp.reason.unwrap();
+    assert!(
+        reason.contains("start is in collision") && reason.contains("blocker"),
+        "{reason}"
+    );
+    // Goal out of reach.
+    let mut r = base.clone();
+    r.goal.as_mut().unwrap().position = [2.0, 0.0, 0.5];
+    let resp = optimize(&r, &robot).unwrap();
+    assert_eq!(resp.status, Status::Infeasible);
+    assert!(resp.reason.unwrap().contains("out of reach"));
+    // Obstacle covering the goal.
+    let mut r = base.clone();
+    let goal = r.goal.as_ref().unwrap().position;
+    r.obstacles.push(Obstacle {
+        id: "over-goal".into(),
+        shape: ObstacleShape::Sphere {
+            center: goal,
+            radius: 0.02,
+        },
+    });
+    let resp = optimize(&r, &robot).unwrap();
+    assert_eq!(resp.status, Status::Infeasible);
+    assert!(resp.reason.unwrap().contains("over-goal"));
+}
+
+#[test]
+fn annotation_prior_with_an_indefinite_joint_is_repaired_and_solved() {
+    let (robot, base) = request(4, 4);
+    let problem = base.validate(&robot).unwrap();
+    let mut joints = joints_from_distribution(problem.prior()).unwrap();
+    // Make joint 5's covariance indefinite, as in the published K = 4 file.
+    let mut cov = decode_covariance(&joints[4].l, DiagEncoding::Raw).unwrap();
+    cov[(7, 7)] -= 2.0 * cov.symmetric_eigenvalues().amax();
+    joints[4].l = encode_covariance(&cov, DiagEncoding::Raw).unwrap();
+    // Through JSON, in the paper's column format.
+    let mut json = serde_json::to_value(&base).unwrap();
+    let annotation: Vec<serde_json::Value> = joints
+        .iter()
+        .map(|j| {
+            serde_json::json!({
+                "mean_weights": j.mean_weights.iter().map(|v| vec![*v]).collect::<Vec<_>>(),
+                "L": j.l,
+            })
+        })
+        .collect();
+    json["prior"] = serde_json::json!({ "annotation": annotation });
+    let req: OptimizeRequest = serde_json::from_value(json).unwrap();
+    let resp = optimize(&req, &robot).unwrap();
+    assert!(
+        resp.report
+            .warnings
+            .iter()
+            .any(|w| w.contains("joint 5") && w.contains("positive semi-definite")),
+        "{:?}",
+        resp.report.warnings
+    );
+    assert_eq!(resp.status, Status::Optimal, "{:?}", resp.reason);
+    let problem = req.validate(&robot).unwrap();
+    assert!(problem.is_feasible(&problem.evaluate(&resp.weights)));
+}
+
+#[test]
+fn same_request_gives_the_same_bytes_except_solve_ms() {
+    let (robot, mut req) = request(6, 6);
+    req.samples = 2;
+    let a = optimize(&req, &robot).unwrap();
+    let b = optimize(&req, &robot).unwrap();
+    assert_eq!(a.deterministic_json(), b.deterministic_json());
+    let text = serde_json::to_string(&a).unwrap();
+    for key in [
+        "\"status\"",
+        "\"weights\"",
+        "\"mahalanobis\"",
+        "\"trajectory\"",
+        "\"joint_names\"",
+        "\"points\"",
+        "\"positions\"",
+        "\"velocities\"",
+        "\"time_from_start\"",
+        "\"report\"",
+        "\"min_clearance_m\"",
+        "\"max_joint_limit_violation_rad\"",
+        "\"max_velocity_ratio\"",
+        "\"goal_error_m\"",
+        "\"iterations\"",
+        "\"solve_ms\"",
+        "\"verified_samples\"",
+        "\"warnings\"",
+        "\"prior_mean_report\"",
+    ] {
+        assert!(text.contains(key), "missing {key}");
+    }
+    assert_eq!(a.report.verified_samples, 600);
+    assert_eq!(a.trajectory.points.len(), 150);
+    // Every returned sample is feasible and no closer to the prior than the optimum.
+    let problem = req.validate(&robot).unwrap();
+    for s in &a.samples {
+        assert_eq!(s.status, Status::Optimal);
+        assert!(problem.is_feasible(&problem.evaluate(&s.weights)));
+        if a.status == Status::Optimal {
+            assert!(s.mahalanobis >= a.mahalanobis - 1e-6);
+        }
+    }
+}
+
+#[test]
+fn a_cancelled_solve_stops_with_max_iterations_and_a_warning() {
+    let (robot, req) = request(7, 10);
+    let flag = Arc::new(AtomicBool::new(true));
+    let ctl = SolveControl {
+        deadline: None,
+        cancel: Some(flag),
+    };
+    let resp = optimize_with(&req, &robot, &ctl).unwrap();
+    let problem = req.validate(&robot).unwrap();
+    let mean_ok = problem.is_feasible(&resp.prior_mean_report);
+    if !mean_ok {
+        assert_eq!(resp.status, Status::MaxIterations);
+        assert!(resp.report.warnings.iter().any(|w| w.contains("cancelled")));
+    }
+    let past = SolveControl {
+        deadline: Some(std::time::Instant::now()),
+        cancel: None,
+    };
+    let resp = optimize_with(&req, &robot, &past).unwrap();
+    if !mean_ok {
+        assert_eq!(resp.status, Status::MaxIterations);
+        assert!(resp.report.warnings.iter().any(|w| w.contains("deadline")));
+    }
+}
