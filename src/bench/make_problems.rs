@@ -23,7 +23,7 @@
 //!   (start in collision) or around the goal (goal inside an obstacle).
 //!
 //! Feasible categories are checked at generation: the start is at least
-//! 5 cm clear of every obstacle and no obstacle comes within 6 cm of the
+//! 5 cm clear of every obstacle and no obstacle comes within 5 cm of the
 //! goal; a draw that fails is replaced by the next sub-seed.
 
 use super::problem_file::{Expect, Meta, ProblemFile, CATEGORIES};
@@ -348,11 +348,11 @@ fn near_path(path: &MeanPath, rng: &mut ChaCha8Rng, n: usize) -> Vec<Obstacle> {
         .collect()
 }
 
-/// 12 stemmed berries 7-12 cm around the goal.
+/// 12 stemmed berries 8-13 cm around the goal.
 fn dense_cluster(path: &MeanPath, rng: &mut ChaCha8Rng) -> Vec<Obstacle> {
     (0..12)
         .map(|k| {
-            let c = path.goal + random_unit(rng) * rng.gen_range(0.07..0.12);
+            let c = path.goal + random_unit(rng) * rng.gen_range(0.08..0.13);
             let radius = rng.gen_range(0.01..0.018);
             Obstacle {
                 id: format!("berry-{k}"),
@@ -360,7 +360,7 @@ fn dense_cluster(path: &MeanPath, rng: &mut ChaCha8Rng) -> Vec<Obstacle> {
                     center: c.into(),
                     radius,
                     elongation: rng.gen_range(0.0..0.006),
-                    stem_top: (c + Vector3::z() * rng.gen_range(0.05..0.08)).into(),
+                    stem_top: (c + Vector3::z() * rng.gen_range(0.03..0.05)).into(),
                     stem_radius: 0.002,
                 },
             }
@@ -400,7 +400,7 @@ fn clear_start_and_goal(robot: &Robot, scene: &Scene, path: &MeanPath) -> bool {
         .min_clearance(robot, &robot.fk(&path.start))
         .is_none_or(|c| c.distance >= CLEARANCE_M + 0.03);
     let goal = Point3::from(path.goal);
-    start_clear && scene.obstacle_containing(&goal, 0.06).is_none()
+    start_clear && scene.obstacle_containing(&goal, 0.05).is_none()
 }
 
 #[cfg(test)]
