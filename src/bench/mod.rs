@@ -1,1 +1,46 @@
-//! (being built)
+//! The offline benchmark suite: problem files ([`problem_file`]), their
+//! seeded generator ([`make_problems`]), the compared methods
+//! ([`methods`]), the parallel runner ([`runner`]) and the reports
+//! ([`report`], [`plots`]). `dpmp bench` (src/cli/bench.rs) is a thin shell
+//! over [`run_suite`] and [`make_problems()`].
+
+pub mod make_problems;
+pub mod methods;
+pub mod plots;
+pub mod problem_file;
+pub mod report;
+pub mod runner;
+
+pub use make_problems::{make_problems, MakeSettings};
+pub use methods::{method_from_name, Method, DEFAULT_METHODS};
+pub use problem_file::{load_dir, Expect, Meta, ProblemFile, CATEGORIES};
+pub use report::Report;
+pub use runner::{run_benchmark, RunRecord, RunSettings};
+
+use crate::robot::Robot;
+use crate::{Error, Result};
+use std::path::Path;
+
+/// Run `methods` on the first `limit` problems of `problems_dir` and write
+/// `report.json`, `report.md` and the plots into `out`.
+pub fn run_suite(
+    problems_dir: &Path,
+    out: &Path,
+    methods: Vec<Box<dyn Method>>,
+    limit: Option<usize>,
+    settings: &RunSettings,
+    command: &str,
+) -> Result<Report> {
+    let mut problems = load_dir(problems_dir)?;
+    if let Some(n) = limit {
+        problems.truncate(n);
+    }
+    std::fs::create_dir_all(out).map_err(|e| Error::file(out, e.to_string()))?;
+    let robot = Robot::panda()?;
+    let records = run_benchmark(&problems, &methods, &robot, settings)?;
+    let names: Vec<String> = methods.iter().map(|m| m.name()).collect();
+    let report = Report::new(command, &names, records);
+    report.write(out)?;
+    plots::write_plots(&report, out)?;
+    Ok(report)
+}

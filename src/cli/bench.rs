@@ -1,13 +1,116 @@
-//! `dpmp bench` (being built).
+//! `dpmp bench`: run the offline benchmark suite, or generate it.
+//!
+//! - `dpmp bench --problems problems/ --out DIR [--methods a,b] [--workers K] [--limit N]`
+//! - `dpmp bench make-problems --out problems/ [--seed S] [--per-category N]`
+
+use crate::bench::{self, method_from_name, MakeSettings, RunSettings, DEFAULT_METHODS};
+use crate::robot::Robot;
+use crate::{Error, Result};
+use std::path::PathBuf;
 
 /// Arguments of `dpmp bench`.
 #[derive(Debug, clap::Args)]
-pub struct BenchArgs {}
+#[command(args_conflicts_with_subcommands = true)]
+pub struct BenchArgs {
+    /// Generate problems instead of running them.
+    #[command(subcommand)]
+    pub command: Option<BenchCommand>,
+    /// Directory of problem files (*.json).
+    #[arg(long, default_value = "problems")]
+    pub problems: PathBuf,
+    /// Output directory for report.json, report.md and the plots.
+    #[arg(long, default_value = "bench-out")]
+    pub out: PathBuf,
+    /// Comma-separated methods: prior-mean, rejection-N, dpmp-qp, penalty-gd
+    /// (default: prior-mean, rejection-100, rejection-1000, dpmp-qp, penalty-gd).
+    #[arg(long, value_delimiter = ',')]
+    pub methods: Vec<String>,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub workers: Option<usize>,
+    /// Run only the first N problems (sorted by file name).
+    #[arg(long)]
+    pub limit: Option<usize>,
+}
+
+/// `dpmp bench` subcommands.
+#[derive(Debug, clap::Subcommand)]
+pub enum BenchCommand {
+    /// Generate the seeded problem suite.
+    MakeProblems(MakeArgs),
+}
+
+/// Arguments of `dpmp bench make-problems`.
+#[derive(Debug, clap::Args)]
+pub struct MakeArgs {
+    /// Output directory (created if missing).
+    #[arg(long, default_value = "problems")]
+    pub out: PathBuf,
+    /// Master seed.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Problems per category (7 categories).
+    #[arg(long, default_value_t = 9)]
+    pub per_category: usize,
+}
 
 /// Run `dpmp bench`.
-pub fn run(_args: BenchArgs) -> crate::Result<()> {
-    Err(crate::Error::invalid(
-        "command",
-        "`dpmp bench` is not available in this build yet",
-    ))
+pub fn run(args: BenchArgs) -> Result<()> {
+    match args.command {
+        Some(BenchCommand::MakeProblems(m)) => make(m),
+        None => run_suite(args),
+    }
+}
+
+fn make(args: MakeArgs) -> Result<()> {
+    let robot = Robot::panda()?;
+    let settings = MakeSettings {
+        seed: args.seed,
+        per_category: args.per_category,
+    };
+    let problems = bench::make_problems(&robot, &settings).map_err(super::as_flag_error)?;
+    std::fs::create_dir_all(&args.out).map_err(|e| Error::file(&args.out, e.to_string()))?;
+    for p in &problems {
+        p.save(&args.out)?;
+    }
+    eprintln!(
+        "wrote {} problems to {}",
+        problems.len(),
+        args.out.display()
+    );
+    Ok(())
+}
+
+fn run_suite(args: BenchArgs) -> Result<()> {
+    if args.workers == Some(0) {
+        return Err(Error::invalid("--workers", "must be at least 1"));
+    }
+    if args.limit == Some(0) {
+        return Err(Error::invalid("--limit", "must be at least 1"));
+    }
+    let names: Vec<String> = if args.methods.is_empty() {
+        DEFAULT_METHODS.iter().map(|s| s.to_string()).collect()
+    } else {
+        args.methods.clone()
+    };
+    let methods = names
+        .iter()
+        .map(|n| method_from_name(n.trim()))
+        .collect::<Result<Vec<_>>>()?;
+    let command = std::env::args().collect::<Vec<_>>().join(" ");
+    let settings = RunSettings {
+        workers: args.workers,
+        progress: true,
+    };
+    let report = bench::run_suite(
+        &args.problems,
+        &args.out,
+        methods,
+        args.limit,
+        &settings,
+        &command,
+    )?;
+    print!("{}", report.markdown());
+    eprintln!("report written to {}", args.out.display());
+    Ok(())
 }
