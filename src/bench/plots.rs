@@ -12,6 +12,14 @@ use std::path::{Path, PathBuf};
 
 const SIZE: (u32, u32) = (960, 480);
 
+/// One scatter plot: file name, title, the value per record, optional reference line.
+type ScatterSpec = (
+    &'static str,
+    &'static str,
+    fn(&RunRecord) -> Option<f64>,
+    Option<f64>,
+);
+
 /// Write every plot of `report` into `dir`; returns the files written.
 pub fn write_plots(report: &Report, dir: &Path) -> Result<Vec<PathBuf>> {
     register_font();
@@ -32,7 +40,7 @@ pub fn write_plots(report: &Report, dir: &Path) -> Result<Vec<PathBuf>> {
         success_by_category(report, p)
     })?;
     emit("solve_time.png", &|p| solve_time(report, p))?;
-    let scatters: [(&str, &str, fn(&RunRecord) -> Option<f64>, Option<f64>); 4] = [
+    let scatters: [ScatterSpec; 4] = [
         (
             "mahalanobis.png",
             "Mahalanobis cost (verified trajectories)",

@@ -17,7 +17,12 @@ pub struct PlanArgs {
     #[arg(long)]
     pub image: PathBuf,
     /// Target berry box in image pixels: x1,y1,x2,y2.
-    #[arg(long = "box", value_delimiter = ',', required = true, allow_negative_numbers = true)]
+    #[arg(
+        long = "box",
+        value_delimiter = ',',
+        required = true,
+        allow_negative_numbers = true
+    )]
     pub target_box: Vec<f64>,
     /// The image already has the target painted as a white box.
     #[arg(long)]
