@@ -27,6 +27,7 @@
 //! goal; a draw that fails is replaced by the next sub-seed.
 
 use super::problem_file::{Expect, Meta, ProblemFile, CATEGORIES};
+use crate::optim::example::random_unit;
 use crate::promp::example::{demonstrations, example_distribution, TYPICAL_FINAL};
 use crate::promp::{fit_weights, Basis, PrompConfig, WeightDistribution};
 use crate::robot::Robot;
@@ -274,20 +275,6 @@ fn stem(id: String, a: Vector3<f64>, length: f64) -> Obstacle {
             b: (a + Vector3::z() * length).into(),
             radius: 0.003,
         },
-    }
-}
-
-fn random_unit(rng: &mut impl Rng) -> Vector3<f64> {
-    loop {
-        let v = Vector3::new(
-            rng.gen_range(-1.0..1.0),
-            rng.gen_range(-1.0..1.0),
-            rng.gen_range(-1.0..1.0),
-        );
-        let n = v.norm();
-        if n > 0.1 && n <= 1.0 {
-            return v / n;
-        }
     }
 }
 

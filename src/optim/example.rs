@@ -156,7 +156,8 @@ pub fn tcp_path(robot: &Robot, q: &DMatrix<f64>) -> Vec<Vector3<f64>> {
         .collect()
 }
 
-fn random_unit(rng: &mut impl Rng) -> Vector3<f64> {
+/// A uniformly random unit vector (rejection sampling in the unit ball).
+pub fn random_unit(rng: &mut impl Rng) -> Vector3<f64> {
     loop {
         let v = Vector3::new(
             rng.gen_range(-1.0..1.0),
