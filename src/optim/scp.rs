@@ -216,15 +216,7 @@ impl Problem {
             converged = false;
             if let Some(why) = ctl.stop_reason() {
                 let warn = format!("solver stopped early: {why}");
-                return Ok(self.finish(
-                    Status::MaxIterations,
-                    &eval,
-                    None,
-                    Some(warn.clone()),
-                    stats,
-                    started,
-                    &[warn],
-                ));
+                return Ok(self.stopped_early(&eval, warn, stats, started));
             }
             if stats.iterations >= self.options.max_iterations {
                 let reason = format!(
@@ -232,15 +224,7 @@ impl Problem {
                     self.options.max_iterations,
                     self.worst_constraint(&eval)
                 );
-                return Ok(self.finish(
-                    Status::MaxIterations,
-                    &eval,
-                    None,
-                    Some(reason),
-                    stats,
-                    started,
-                    &[],
-                ));
+                return Ok(self.unverified(Status::MaxIterations, &eval, reason, stats, started));
             }
             let trust = eval.linear_ok.then_some(radius);
             let (sol, model_here) = match self.subproblem(
@@ -255,38 +239,20 @@ impl Problem {
                 Ok(x) => x,
                 Err(QpFailure::Infeasible) => {
                     let reason = "joint position limits (minus the margin), velocity limits and the start / final configuration cannot all hold".to_string();
-                    return Ok(self.finish(
-                        Status::Infeasible,
-                        &eval,
-                        None,
-                        Some(reason),
-                        stats,
-                        started,
-                        &[],
-                    ));
+                    return Ok(self.unverified(Status::Infeasible, &eval, reason, stats, started));
                 }
                 Err(QpFailure::OutOfTime) => {
                     let warn = "solver stopped early: deadline reached".to_string();
-                    return Ok(self.finish(
-                        Status::MaxIterations,
-                        &eval,
-                        None,
-                        Some(warn.clone()),
-                        stats,
-                        started,
-                        &[warn],
-                    ));
+                    return Ok(self.stopped_early(&eval, warn, stats, started));
                 }
                 Err(QpFailure::Numerical(what)) => {
                     let reason = format!("QP solver failed ({what}); best iterate returned");
-                    return Ok(self.finish(
+                    return Ok(self.unverified(
                         Status::MaxIterations,
                         &eval,
-                        None,
-                        Some(reason),
+                        reason,
                         stats,
                         started,
-                        &[],
                     ));
                 }
             };
@@ -346,15 +312,7 @@ impl Problem {
                         "constraint cannot be satisfied: {}",
                         self.worst_constraint(&eval)
                     );
-                    return Ok(self.finish(
-                        Status::Infeasible,
-                        &eval,
-                        None,
-                        Some(reason),
-                        stats,
-                        started,
-                        &[],
-                    ));
+                    return Ok(self.unverified(Status::Infeasible, &eval, reason, stats, started));
                 }
             }
         }
@@ -578,6 +536,39 @@ impl Problem {
             }
             None => "no constraint violated on the optimisation phases".into(),
         }
+    }
+
+    /// Finish without a prior verification (it is run here) and with `reason`.
+    fn unverified(
+        &self,
+        status: Status,
+        eval: &GridEval,
+        reason: String,
+        stats: SolveStats,
+        started: Instant,
+    ) -> Solution {
+        self.finish(status, eval, None, Some(reason), stats, started, &[])
+    }
+
+    /// Finish as `max_iterations` because the caller stopped the solver;
+    /// the reason is also reported as a warning.
+    fn stopped_early(
+        &self,
+        eval: &GridEval,
+        warn: String,
+        stats: SolveStats,
+        started: Instant,
+    ) -> Solution {
+        let warnings = [warn.clone()];
+        self.finish(
+            Status::MaxIterations,
+            eval,
+            None,
+            Some(warn),
+            stats,
+            started,
+            &warnings,
+        )
     }
 
     #[allow(clippy::too_many_arguments)]

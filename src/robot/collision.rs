@@ -74,12 +74,7 @@ impl ShapeGeometry {
                 half_extents,
                 rotation,
             } => {
-                let q = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
-                    rotation[3],
-                    rotation[0],
-                    rotation[1],
-                    rotation[2],
-                ));
+                let q = quaternion_xyzw(rotation);
                 let r = pose.rotation * q;
                 ShapeGeometry::Box {
                     center: map(center),
@@ -109,12 +104,7 @@ impl ShapeGeometry {
                 half_extents,
                 rotation,
             } => {
-                let q = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
-                    rotation[3],
-                    rotation[0],
-                    rotation[1],
-                    rotation[2],
-                ));
+                let q = quaternion_xyzw(rotation);
                 let local = q.inverse() * (Point3::from(*p) - Point3::from(*center));
                 let outside =
                     nalgebra::Vector3::from_fn(|i, _| (local[i].abs() - half_extents[i]).max(0.0));
@@ -205,6 +195,11 @@ fn ensure_non_negative(field: &str, value: f64) -> Result<()> {
             format!("must be a finite number >= 0, got {value}"),
         ))
     }
+}
+
+/// Unit quaternion from `[x, y, z, w]` (the project's convention).
+fn quaternion_xyzw(r: &[f64; 4]) -> nalgebra::UnitQuaternion<f64> {
+    nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(r[3], r[0], r[1], r[2]))
 }
 
 #[cfg(test)]
