@@ -119,12 +119,15 @@ pub fn encode_covariance(cov: &DMatrix<f64>, encoding: DiagEncoding) -> Result<V
     }
     ensure_finite("cov", cov.as_slice())?;
     let (l, d) = ldl(cov);
+    // Pivots of a rank-deficient matrix come out as round-off of either sign;
+    // only a negative pivot beyond that round-off means "indefinite".
+    let roundoff = cov.diagonal().amax() * 1e-12;
     let mut packed = l;
     for i in 0..n {
         packed[(i, i)] = match encoding {
             DiagEncoding::Raw => d[i],
             DiagEncoding::Log => {
-                if d[i] < 0.0 {
+                if d[i] < -roundoff {
                     return Err(Error::invalid(
                         "cov",
                         format!("not positive semi-definite (pivot {i} is {})", d[i]),
@@ -230,5 +233,19 @@ mod tests {
             Some("L[1]")
         );
         assert!(decode_covariance(&[1000.0, 0.0, 0.0], DiagEncoding::Log).is_err());
+    }
+
+    #[test]
+    fn rank_deficient_covariances_encode_and_indefinite_ones_do_not() {
+        // Rank 2 in 4 dimensions: the round-off pivots must not count as negative.
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+        let a = DMatrix::from_fn(4, 2, |_, _| rng.gen_range(-40.0..40.0));
+        let cov = &a * a.transpose();
+        let code = encode_covariance(&cov, DiagEncoding::Log).unwrap();
+        let back = decode_covariance(&code, DiagEncoding::Log).unwrap();
+        assert!((&back - &cov).amax() < 1e-8 * cov.amax());
+        let indefinite = DMatrix::from_row_slice(2, 2, &[1.0, 2.0, 2.0, 1.0]);
+        let err = encode_covariance(&indefinite, DiagEncoding::Log).unwrap_err();
+        assert_eq!(err.field(), Some("cov"));
     }
 }
