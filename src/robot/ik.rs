@@ -299,7 +299,14 @@ fn dls_step(
                     .zip(q)
                     .map(|(b, x)| options.null_space_gain * (b - x)),
             );
-            (DMatrix::identity(n, n) - &pseudo * jacobian) * pull
+            // The exact projector (not the damped one) so that the pull
+            // never leaks into the task and stalls it short of the target.
+            let gram = jacobian * jacobian.transpose() + DMatrix::identity(m, m) * 1e-12;
+            let projector = match gram.cholesky() {
+                Some(c) => DMatrix::identity(n, n) - jacobian.transpose() * c.inverse() * jacobian,
+                None => DMatrix::identity(n, n) - &pseudo * jacobian,
+            };
+            projector * pull
         }
     };
     Some((task, null))

@@ -5,8 +5,11 @@
 //! pre-grasp TCP position `standoff_m` short of the berry centre along the
 //! approach axis (the direction from the home TCP, i.e. the camera side, to
 //! the berry) with position and axis noise, solved by [`Robot::ik`] with a
-//! random null-space bias around home (so the redundant joints vary like a
-//! human demonstrator's), then a minimum-jerk joint profile plus a random
+//! random null-space bias around the target's noise-free pre-grasp
+//! configuration (one elbow/wrist branch per target), plus final-pose
+//! joint noise with the TCP position restored by a position-only IK (so
+//! the redundant joints vary like a human demonstrator's), then a
+//! minimum-jerk joint profile plus a random
 //! via-point bump, `n_samples` samples. It is kept only if every joint stays
 //! within its limits and the robot keeps `clearance_m` from every obstacle
 //! at every `check_stride`-th sample (and the last); otherwise it is drawn
@@ -109,6 +112,9 @@ pub fn approach_axis(home_tcp: &Point3<f64>, berry: &Point3<f64>) -> Result<Unit
         .ok_or_else(|| Error::invalid("target_position", "coincides with the home TCP"))
 }
 
+/// Iterations of the position-only IK after the final-pose noise.
+const FINAL_POSITION_IK_ITERATIONS: usize = 100;
+
 impl DemoContext<'_> {
     /// Generate all demonstrations of one target.
     pub fn target(
@@ -119,15 +125,102 @@ impl DemoContext<'_> {
     ) -> Result<TargetDemos> {
         let home = self.robot.home();
         let axis = approach_axis(&self.robot.tcp_pose(&home).translation.vector.into(), berry)?;
+        let anchor = self.nominal_solution(&home, berry, &axis, berry_id)?;
         let demos = (0..self.settings.demos)
-            .map(|_| self.one_with_retries(&home, berry, &axis, berry_id, rng))
+            .map(|_| self.one_with_retries(&home, &anchor, berry, &axis, berry_id, rng))
             .collect::<Result<Vec<_>>>()?;
         self.summarise(demos)
+    }
+
+    /// The noise-free pre-grasp configuration reached from home: every
+    /// demonstration of the target is biased towards it, so that they all
+    /// stay on one elbow / wrist branch as a human demonstrator's do.
+    fn nominal_solution(
+        &self,
+        home: &[f64],
+        berry: &Point3<f64>,
+        axis: &Unit<Vector3<f64>>,
+        berry_id: &str,
+    ) -> Result<Vec<f64>> {
+        let target = IkTarget {
+            position: berry - axis.into_inner() * self.settings.standoff_m,
+            approach_axis: Some(*axis),
+        };
+        let sol = self.robot.ik(&target, home, &self.ik_options(home, 0))?;
+        if !self.ik_converged(&sol) {
+            return Err(Error::Infeasible(format!(
+                "no pre-grasp configuration for {berry_id} (IK position error {:.4} m)",
+                sol.position_error_m
+            )));
+        }
+        Ok(sol.q)
+    }
+
+    /// IK settings of a demonstration biased towards `bias`.
+    fn ik_options(&self, bias: &[f64], seed: u64) -> IkOptions {
+        IkOptions {
+            null_space_bias: Some(bias.to_vec()),
+            null_space_gain: self.settings.null_space_gain,
+            max_iterations: 600,
+            // Iterate to a tight tolerance so the null-space pull acts;
+            // accept anything within the demo tolerance.
+            tolerance_m: 1e-4,
+            axis_tolerance_rad: 1e-3,
+            restarts: 0,
+            seed,
+            ..IkOptions::default()
+        }
+    }
+
+    /// The demonstrator's own final-pose variation: joint noise on the IK
+    /// solution, then the TCP position (not the approach axis) restored by
+    /// a position-only IK from there, so the hand still stops at the
+    /// pre-grasp point while wrist and elbow angles vary.
+    fn final_pose_noise(
+        &self,
+        q: &[f64],
+        position: &Point3<f64>,
+        rng: &mut impl Rng,
+    ) -> std::result::Result<Vec<f64>, String> {
+        let noise = &self.settings.final_joint_noise_rad;
+        let noisy: Vec<f64> = q
+            .iter()
+            .enumerate()
+            .map(|(j, v)| v + noise.get(j).copied().unwrap_or(0.0) * standard_normal(rng))
+            .collect();
+        let options = IkOptions {
+            max_iterations: FINAL_POSITION_IK_ITERATIONS,
+            tolerance_m: 1e-4,
+            restarts: 0,
+            ..IkOptions::default()
+        };
+        let target = IkTarget {
+            position: *position,
+            approach_axis: None,
+        };
+        let sol = self
+            .robot
+            .ik(&target, &noisy, &options)
+            .map_err(|e| format!("IK failed: {e}"))?;
+        if sol.position_error_m > self.settings.ik_tolerance_m {
+            return Err(format!(
+                "final-pose noise left the TCP {:.4} m from the pre-grasp point",
+                sol.position_error_m
+            ));
+        }
+        Ok(sol.q)
+    }
+
+    /// Whether an IK answer is within the demonstration tolerances.
+    fn ik_converged(&self, sol: &crate::robot::IkSolution) -> bool {
+        sol.position_error_m <= self.settings.ik_tolerance_m
+            && sol.axis_error_rad <= self.settings.ik_axis_tolerance_rad
     }
 
     fn one_with_retries(
         &self,
         home: &[f64],
+        anchor: &[f64],
         berry: &Point3<f64>,
         axis: &Unit<Vector3<f64>>,
         berry_id: &str,
@@ -135,7 +228,7 @@ impl DemoContext<'_> {
     ) -> Result<Demonstration> {
         let mut last = String::new();
         for _ in 0..self.settings.max_tries {
-            match self.one(home, berry, axis, rng) {
+            match self.one(home, anchor, berry, axis, rng) {
                 Ok(d) => return Ok(d),
                 Err(reason) => last = reason,
             }
@@ -150,6 +243,7 @@ impl DemoContext<'_> {
     fn one(
         &self,
         home: &[f64],
+        anchor: &[f64],
         berry: &Point3<f64>,
         axis: &Unit<Vector3<f64>>,
         rng: &mut impl Rng,
@@ -165,32 +259,18 @@ impl DemoContext<'_> {
                 + noise,
             approach_axis: Some(goal_axis),
         };
-        let bias: Vec<f64> = home
+        let bias: Vec<f64> = anchor
             .iter()
             .enumerate()
-            .map(|(j, h)| {
-                h + s.null_space_std_rad.get(j).copied().unwrap_or(0.0) * standard_normal(rng)
+            .map(|(j, a)| {
+                a + s.null_space_std_rad.get(j).copied().unwrap_or(0.0) * standard_normal(rng)
             })
             .collect();
-        let options = IkOptions {
-            null_space_bias: Some(bias.clone()),
-            null_space_gain: self.settings.null_space_gain,
-            max_iterations: 600,
-            // Iterate to a tight tolerance so the null-space pull acts;
-            // accept anything within the demo tolerance below.
-            tolerance_m: 1e-4,
-            axis_tolerance_rad: 1e-3,
-            restarts: 0,
-            seed: rng.gen(),
-            ..IkOptions::default()
-        };
         let sol = self
             .robot
-            .ik(&target, &bias, &options)
+            .ik(&target, &bias, &self.ik_options(&bias, rng.gen()))
             .map_err(|e| format!("IK failed: {e}"))?;
-        if !(sol.position_error_m <= s.ik_tolerance_m
-            && sol.axis_error_rad <= s.ik_axis_tolerance_rad)
-        {
+        if !self.ik_converged(&sol) {
             return Err(format!(
                 "IK did not converge (position error {:.4} m)",
                 sol.position_error_m
@@ -199,13 +279,14 @@ impl DemoContext<'_> {
         let via: Vec<f64> = (0..home.len())
             .map(|_| rng.gen_range(-1.0..=1.0) * s.via_deviation_rad)
             .collect();
-        let trajectory = reaching_trajectory(&start, &sol.q, &via, self.basis.n_samples());
+        let final_q = self.final_pose_noise(&sol.q, &target.position, rng)?;
+        let trajectory = reaching_trajectory(&start, &final_q, &via, self.basis.n_samples());
         self.check_limits(&trajectory)?;
         let min_clearance_m = self.check_clearance(&trajectory)?;
         let weights =
             fit_weights(self.basis, &trajectory).map_err(|e| format!("ProMP fit failed: {e}"))?;
         Ok(Demonstration {
-            final_tcp: self.robot.tcp_pose(&sol.q),
+            final_tcp: self.robot.tcp_pose(&final_q),
             trajectory,
             weights,
             min_clearance_m,

@@ -361,8 +361,13 @@ pub struct DemoSettings {
     pub axis_pitch_noise_rad: f64,
     /// Standard deviation of the stop distance along the approach (m).
     pub standoff_jitter_m: f64,
-    /// Standard deviation per joint of the random null-space bias around home (rad).
+    /// Standard deviation per joint of the random null-space bias around the
+    /// target's noise-free pre-grasp configuration (rad).
     pub null_space_std_rad: Vec<f64>,
+    /// Standard deviation per joint of the noise added to the IK solution
+    /// (rad): the demonstrator's own final-pose variation (the wrist and
+    /// elbow vary most in the real data); missing entries are 0.
+    pub final_joint_noise_rad: Vec<f64>,
     /// Pre-grasp position accuracy demanded of IK (m).
     pub ik_tolerance_m: f64,
     /// Pre-grasp approach-axis accuracy demanded of IK (rad).
@@ -389,11 +394,12 @@ impl Default for DemoSettings {
             start_std_rad: 0.004,
             start_max_rad: 0.012,
             standoff_m: 0.10,
-            position_noise_m: 0.008,
+            position_noise_m: 0.002,
             axis_noise_rad: 0.01,
-            axis_pitch_noise_rad: 0.12,
-            standoff_jitter_m: 0.015,
+            axis_pitch_noise_rad: 0.015,
+            standoff_jitter_m: 0.01,
             null_space_std_rad: vec![0.005, 0.005, 0.005, 0.005, 0.005, 0.005, 0.4],
+            final_joint_noise_rad: vec![0.0, 0.04, 0.02, 0.5, 0.06, 0.25, 0.0],
             ik_tolerance_m: 0.003,
             ik_axis_tolerance_rad: 0.02,
             null_space_gain: 0.8,
@@ -459,12 +465,14 @@ impl DemoSettings {
                 "must be >= start_std_rad",
             ));
         }
-        ensure_finite("demos.null_space_std_rad", &self.null_space_std_rad)?;
-        if let Some(i) = self.null_space_std_rad.iter().position(|v| *v < 0.0) {
-            return Err(Error::invalid(
-                format!("demos.null_space_std_rad[{i}]"),
-                "must be >= 0",
-            ));
+        for (name, values) in [
+            ("null_space_std_rad", &self.null_space_std_rad),
+            ("final_joint_noise_rad", &self.final_joint_noise_rad),
+        ] {
+            ensure_finite(&format!("demos.{name}"), values)?;
+            if let Some(i) = values.iter().position(|v| *v < 0.0) {
+                return Err(Error::invalid(format!("demos.{name}[{i}]"), "must be >= 0"));
+            }
         }
         let needed = berry_extent(berry_radius_hi)
             + self.clearance_m
