@@ -65,8 +65,8 @@ impl Model {
         target_box: [f64; 4],
         mask_applied: bool,
     ) -> Result<Prepared> {
-        preprocess::prepare(
-            &image.to_rgb8(),
+        preprocess::prepare_owned(
+            image.to_rgb8(),
             target_box,
             mask_applied,
             &self.config().preprocess,

@@ -124,19 +124,46 @@ pub fn prepare(
     mask_applied: bool,
     config: &PreprocessConfig,
 ) -> Result<Prepared> {
+    if mask_applied {
+        prepare_masked(image, target_box, config)
+    } else {
+        prepare_owned(image.clone(), target_box, false, config)
+    }
+}
+
+/// [`prepare`] on an image the caller gives away: the box is painted in
+/// place (no copy of the full-size image).
+pub fn prepare_owned(
+    mut image: RgbImage,
+    target_box: [f64; 4],
+    mask_applied: bool,
+    config: &PreprocessConfig,
+) -> Result<Prepared> {
+    if !mask_applied {
+        check_image_and_box(&image, target_box)?;
+        paint_box(&mut image, target_box, config.box_colour);
+    }
+    prepare_masked(&image, target_box, config)
+}
+
+fn check_image_and_box(image: &RgbImage, target_box: [f64; 4]) -> Result<()> {
     let (width, height) = image.dimensions();
     if width == 0 || height == 0 {
         return Err(Error::invalid("image", "image is empty"));
     }
-    validate_box(target_box, width, height)?;
+    validate_box(target_box, width, height)
+}
+
+/// Resize, normalise and condition an image whose box is already painted.
+fn prepare_masked(
+    image: &RgbImage,
+    target_box: [f64; 4],
+    config: &PreprocessConfig,
+) -> Result<Prepared> {
+    check_image_and_box(image, target_box)?;
+    let (width, height) = image.dimensions();
     let side = config.input_size as u32;
-    let resized = if mask_applied {
-        image::imageops::thumbnail(image, side, side)
-    } else {
-        let mut painted = image.clone();
-        paint_box(&mut painted, target_box, config.box_colour);
-        image::imageops::thumbnail(&painted, side, side)
-    };
+    let resized = image::imageops::thumbnail(image, side, side);
     Ok(Prepared {
         pixels: normalise(&resized, config),
         condition: box_condition(target_box, width, height),
