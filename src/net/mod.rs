@@ -23,6 +23,7 @@ pub mod models;
 pub mod ops;
 pub mod predict;
 pub mod preprocess;
+pub mod resize;
 
 pub use config::{Arch, ModelConfig, OutputNorm};
 pub use covariance::CovarianceDecoder;
