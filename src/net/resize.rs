@@ -1,5 +1,5 @@
 //! Exact area-averaging resize of an RGB8 image straight to the network's
-//! normalised channel-major `f32` input, in two separable passes, with the
+//! normalised channel-major `f32` input, in two separable passes (vertical first, on whole rows), with the
 //! target box painted on the fly (no copy of the full-size image). Each
 //! output pixel is the mean of the source area it covers (fractional
 //! coverage at its edges), so down- and up-scaling by any factor keep a
@@ -77,54 +77,64 @@ pub fn resize_normalise(
     let xs = AxisTaps::new(w, side);
     let ys = AxisTaps::new(h, side);
     let raw = image.as_raw();
+    let row_len = w * 3;
+    // Vertical pass first (whole interleaved rows, vectorisable): side x w x 3.
+    let mut rows = vec![0f32; side * row_len];
     let mut painted_row = Vec::new();
-    // Horizontal pass: rows x side x 3.
-    let mut rows = vec![0f32; h * side * 3];
-    for y in 0..h {
-        let mut src = &raw[y * w * 3..(y + 1) * w * 3];
-        if let Some(p) = paint {
-            let [x0, y0, x1, y1] = p.pixels;
-            if (y0..y1).contains(&y) && x0 < x1 {
-                painted_row.clear();
-                painted_row.extend_from_slice(src);
-                for px in painted_row[x0 * 3..x1 * 3].chunks_mut(3) {
-                    px.copy_from_slice(&p.colour);
-                }
-                src = &painted_row;
-            }
-        }
-        let out = &mut rows[y * side * 3..(y + 1) * side * 3];
-        for (ox, acc) in out.chunks_mut(3).enumerate() {
-            let (first, weights) = xs.get(ox);
-            for (k, &wk) in weights.iter().enumerate() {
-                let px = &src[(first + k) * 3..(first + k) * 3 + 3];
-                for c in 0..3 {
-                    acc[c] += wk * f32::from(px[c]);
-                }
+    for (oy, acc) in rows.chunks_exact_mut(row_len).enumerate() {
+        let (first, weights) = ys.get(oy);
+        for (k, &wk) in weights.iter().enumerate() {
+            let y = first + k;
+            let src = source_row(raw, row_len, y, paint, &mut painted_row);
+            for (a, &v) in acc.iter_mut().zip(src) {
+                *a += wk * f32::from(v);
             }
         }
     }
-    // Vertical pass, normalisation and the channel-major layout.
+    // Horizontal pass, normalisation and the channel-major layout.
     let plane = side * side;
     let mut out = vec![0f32; 3 * plane];
-    let mut acc = vec![0f32; side * 3];
     let gain = scale / 255.0;
-    for oy in 0..side {
-        acc.iter_mut().for_each(|a| *a = 0.0);
-        let (first, weights) = ys.get(oy);
-        for (k, &wk) in weights.iter().enumerate() {
-            let row = &rows[(first + k) * side * 3..(first + k + 1) * side * 3];
-            for (a, &v) in acc.iter_mut().zip(row) {
-                *a += wk * v;
-            }
-        }
+    for (oy, row) in rows.chunks_exact(row_len).enumerate() {
         for ox in 0..side {
-            for c in 0..3 {
-                out[c * plane + oy * side + ox] = acc[ox * 3 + c] * gain + shift;
+            let (first, weights) = xs.get(ox);
+            let mut acc = [0f32; 3];
+            for (px, &wk) in row[first * 3..].chunks_exact(3).zip(weights) {
+                acc[0] += wk * px[0];
+                acc[1] += wk * px[1];
+                acc[2] += wk * px[2];
+            }
+            for (c, a) in acc.iter().enumerate() {
+                out[c * plane + oy * side + ox] = a * gain + shift;
             }
         }
     }
     out
+}
+
+/// Row `y` of the interleaved RGB8 buffer, with the paint applied (into
+/// `scratch`) when the row crosses the painted box.
+fn source_row<'a>(
+    raw: &'a [u8],
+    row_len: usize,
+    y: usize,
+    paint: Option<Paint>,
+    scratch: &'a mut Vec<u8>,
+) -> &'a [u8] {
+    let src = &raw[y * row_len..(y + 1) * row_len];
+    let Some(p) = paint else {
+        return src;
+    };
+    let [x0, y0, x1, y1] = p.pixels;
+    if !(y0..y1).contains(&y) || x0 >= x1 {
+        return src;
+    }
+    scratch.clear();
+    scratch.extend_from_slice(src);
+    for px in scratch[x0 * 3..x1 * 3].chunks_mut(3) {
+        px.copy_from_slice(&p.colour);
+    }
+    scratch
 }
 
 #[cfg(test)]
