@@ -43,6 +43,7 @@ fn sweep(robot: &Robot, requests: &[OptimizeRequest]) {
     let mut total_ms = Vec::new();
     let mut iterations = Vec::new();
     let mut rows = Vec::new();
+    let mut split = [0.0f64; 3];
     let (mut optimal, mut infeasible, mut max_iter, mut mean_feasible) = (0, 0, 0, 0);
     for req in requests {
         let t0 = Instant::now();
@@ -57,6 +58,9 @@ fn sweep(robot: &Robot, requests: &[OptimizeRequest]) {
         solve_ms.push(t1.elapsed().as_secs_f64() * 1e3);
         iterations.push(sol.stats.iterations as f64);
         rows.push(sol.stats.max_qp_rows as f64);
+        split[0] += sol.stats.qp_ms;
+        split[1] += sol.stats.evaluation_ms;
+        split[2] += sol.stats.verification_ms;
         match resp.status {
             Status::Optimal => optimal += 1,
             Status::Infeasible => infeasible += 1,
@@ -90,6 +94,13 @@ fn sweep(robot: &Robot, requests: &[OptimizeRequest]) {
         percentile(&rows, 0.5),
         percentile(&rows, 0.99),
         rows[n - 1]
+    );
+    let total: f64 = solve_ms.iter().sum();
+    println!(
+        "  time split: QP build+solve {:.0} %, iterate evaluation {:.0} %, dense verification {:.0} %",
+        100.0 * split[0] / total,
+        100.0 * split[1] / total,
+        100.0 * split[2] / total
     );
     println!("  peak RSS (VmHWM) {:.1} MB", peak_rss_mb());
 }

@@ -22,7 +22,7 @@ fn bench(c: &mut Criterion) {
     });
     let s = g.settings();
     let mut rng = config_rng(1, 0);
-    let plant = sample_plant(&s.plant, g.camera(), 4.0, 5, &mut rng).unwrap();
+    let plant = sample_plant(&s.plant, g.camera(), 4.0, 5, &g.placement(), &mut rng).unwrap();
     group.bench_function("render_640x480", |b| {
         b.iter(|| render_plant(&plant, g.camera(), &s.render, &mut rng))
     });

@@ -3,6 +3,7 @@
 #
 #   scripts/load.sh                # release build, 10 s per point, 60 s memory run
 #   PROFILE=dev DURATION=5s MEMORY_S=30 scripts/load.sh
+#   SEED=3 scripts/load.sh         # another typical problem (default seed 0)
 #
 # Measures /v1/optimize on the typical problem (real-like prior, 10-obstacle
 # cluster, 150 samples, 2 cm clearance; `dpmp serve --print-typical-request`)
@@ -34,7 +35,7 @@ else
   BIN=target/debug/dpmp
 fi
 
-"$BIN" serve --print-typical-request 1 > "$OUT/optimize.json"
+"$BIN" serve --print-typical-request "${SEED:-0}" > "$OUT/optimize.json"
 cat > "$OUT/post.lua" <<LUA
 local f = io.open("$OUT/body.json", "rb")
 wrk.method = "POST"
@@ -53,7 +54,7 @@ done
 
 run_wrk() { # route clients duration
   local threads=$(( $2 < 2 ? $2 : 2 ))
-  wrk -t "$threads" -c "$2" -d "$3" --latency -s "$OUT/post.lua" "http://$ADDR$1"
+  wrk -t "$threads" -c "$2" -d "$3" --timeout 30s --latency -s "$OUT/post.lua" "http://$ADDR$1"
 }
 
 summarise() { # route clients < wrk output

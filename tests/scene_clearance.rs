@@ -122,6 +122,12 @@ proptest! {
             prop_assert_eq!((a.shape, a.obstacle), (b.shape, b.obstacle));
             prop_assert!((a.distance - b.distance).abs() < 1e-6);
         }
+        for c in &everything {
+            let pair = scene.pair_clearance(&robot, &frames, c.shape, c.obstacle).unwrap();
+            prop_assert!((pair.distance - c.distance).abs() < 1e-6);
+        }
+        prop_assert!(scene.pair_clearance(&robot, &frames, robot.collision_shapes().len(), 0).is_none());
+        prop_assert!(scene.pair_clearance(&robot, &frames, 0, 20).is_none());
         let min = scene.min_clearance(&robot, &frames).unwrap();
         let brute_min = everything.iter().map(|c| c.distance).fold(f64::INFINITY, f64::min);
         prop_assert!((min.distance - brute_min).abs() < 1e-6, "{} vs {brute_min}", min.distance);

@@ -136,7 +136,6 @@ fn bad_settings_fail_before_any_file_is_written() {
 const REFERENCE_FINAL_STD: [f64; 7] = [0.04, 0.05, 0.04, 0.11, 0.09, 0.22, 0.34];
 
 #[test]
-#[ignore = "known gap: joints 1 and 3 vary 2.3-2.8x more than the real data (IK self-motion not pinned by the null-space bias yet); run with --ignored"]
 fn final_std_per_joint_is_within_a_factor_two_of_the_real_data() {
     let g = Generator::new(SynthSettings::new(4, 3), Robot::panda().unwrap()).unwrap();
     let summaries: Vec<TargetSummary> = (0..4)

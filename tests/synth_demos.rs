@@ -7,7 +7,7 @@ use dpmp::scene::Scene;
 use dpmp::synth::camera::Camera;
 use dpmp::synth::demos::DemoContext;
 use dpmp::synth::obstacles::plant_obstacles;
-use dpmp::synth::plant::sample_plant;
+use dpmp::synth::plant::{sample_plant, Placement};
 use dpmp::synth::settings::SynthSettings;
 use nalgebra::{Point3, Vector3};
 use rand::SeedableRng;
@@ -28,7 +28,8 @@ fn demos_start_at_home_reach_the_pregrasp_and_are_collision_free() {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
     let mut checked = 0;
     for _ in 0..6 {
-        let plant = sample_plant(&s.plant, &cam, 4.0, 3, &mut rng).unwrap();
+        let plant =
+            sample_plant(&s.plant, &cam, 4.0, 3, &Placement::at_points(), &mut rng).unwrap();
         let scene = Scene::new(plant_obstacles(&plant)).unwrap();
         let ctx = DemoContext {
             robot: &robot,

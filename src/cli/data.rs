@@ -5,7 +5,7 @@ use crate::promp::annotation::load_dir;
 use crate::robot::Robot;
 use crate::synth::dataset::{load_manifest, load_record, write_png_atomic};
 use crate::synth::generate::{check_output_dir, generate, GenerateOptions, Generator};
-use crate::synth::settings::SynthSettings;
+use crate::synth::settings::{RegionAnchor, SynthSettings};
 use crate::synth::stats::{
     dataset_stats, default_basis, format_table, DatasetStats, TargetSummary,
 };
@@ -47,9 +47,16 @@ pub struct GenerateArgs {
     /// JSON file overriding generator settings (any subset of the manifest's `settings`).
     #[arg(long)]
     pub settings: Option<PathBuf>,
-    /// Berry region `xmin,ymin,zmin,xmax,ymax,zmax` (m), instead of the real data's region.
+    /// Target region `xmin,ymin,zmin,xmax,ymax,zmax` (m), instead of the real data's region.
     #[arg(long, value_delimiter = ',', num_args = 6)]
     pub region: Option<Vec<f64>>,
+    /// What `--region` bounds: `pre-grasp` (default: the demonstrations end
+    /// in it, as the real ones do) or `berry` (the berry centres).
+    #[arg(long, value_parser = parse_anchor)]
+    pub region_anchor: Option<RegionAnchor>,
+    /// Pre-grasp stop distance before the berry centre (m).
+    #[arg(long)]
+    pub standoff: Option<f64>,
     /// Replace an existing dataset in `--out`.
     #[arg(long)]
     pub overwrite: bool,
@@ -88,6 +95,15 @@ pub struct PreviewArgs {
     pub seed: u64,
 }
 
+/// `pre-grasp` or `berry`.
+fn parse_anchor(text: &str) -> std::result::Result<RegionAnchor, String> {
+    match text {
+        "pre-grasp" => Ok(RegionAnchor::PreGrasp),
+        "berry" => Ok(RegionAnchor::Berry),
+        other => Err(format!("expected `pre-grasp` or `berry`, got `{other}`")),
+    }
+}
+
 /// Run a `dpmp data` subcommand.
 pub fn run(command: DataCommand) -> Result<()> {
     match command {
@@ -110,6 +126,12 @@ pub fn settings_from_args(a: &GenerateArgs) -> Result<SynthSettings> {
         crate::error::ensure_len("region", r, 6)?;
         s.plant.region.min = [r[0], r[1], r[2]];
         s.plant.region.max = [r[3], r[4], r[5]];
+    }
+    if let Some(anchor) = a.region_anchor {
+        s.plant.region_anchor = anchor;
+    }
+    if let Some(d) = a.standoff {
+        s.demos.standoff_m = d;
     }
     s.validate()?;
     Ok(s)

@@ -130,7 +130,7 @@ impl Default for SolverOptions {
             bound_weights: false,
             trust_region: 1.0,
             penalty: 1e3,
-            qp_tolerance: 1e-9,
+            qp_tolerance: 1e-8,
             final_configuration: None,
         }
     }

@@ -92,6 +92,20 @@ pub struct SolveStats {
     pub added_phases: usize,
     /// Final L1 penalty.
     pub final_penalty: f64,
+    /// Wall time building and solving QPs (ms).
+    pub qp_ms: f64,
+    /// Wall time evaluating iterates on the optimisation phases (ms).
+    pub evaluation_ms: f64,
+    /// Wall time in dense verification (ms).
+    pub verification_ms: f64,
+}
+
+/// Run `f`, adding its wall time in milliseconds to `acc`.
+fn timed<T>(acc: &mut f64, f: impl FnOnce() -> T) -> T {
+    let t = Instant::now();
+    let out = f();
+    *acc += t.elapsed().as_secs_f64() * 1e3;
+    out
 }
 
 /// The result of [`Problem::solve`] / [`Problem::project`].
@@ -175,16 +189,18 @@ impl Problem {
         let mut stats = SolveStats::default();
         let mut rho = self.options.penalty;
         let mut radius = self.options.trust_region;
-        let mut eval = self.evaluate_grid(&rows, centre.clone(), centre);
+        let mut eval = timed(&mut stats.evaluation_ms, || {
+            self.evaluate_grid(&rows, centre.clone(), centre)
+        });
         let mut converged = true;
-        // Temporal screening of clearance rows; switched off for good when
-        // the trust region collapses with it on, so that a stall (and so a
-        // penalty increase or an `infeasible` verdict) is only declared on
-        // the full set of clearance rows.
+        // Temporal screening of clearance rows; switched off for good at
+        // the first rejected step, so that a stall (and so a penalty
+        // increase or an `infeasible` verdict) is only declared on the full
+        // set of clearance rows.
         let mut screen_time = true;
         loop {
             if converged && eval.feasible() {
-                let v = self.verify(&eval.w);
+                let v = timed(&mut stats.verification_ms, || self.verify(&eval.w));
                 if v.flagged.is_empty() && self.is_feasible(&v.report) {
                     stats.final_penalty = rho;
                     return Ok(self.finish(
@@ -211,7 +227,9 @@ impl Problem {
                         &[],
                     ));
                 }
-                eval = self.evaluate_grid(&rows, eval.z.clone(), centre);
+                eval = timed(&mut stats.evaluation_ms, || {
+                    self.evaluate_grid(&rows, eval.z.clone(), centre)
+                });
             }
             converged = false;
             if let Some(why) = ctl.stop_reason() {
@@ -227,15 +245,9 @@ impl Problem {
                 return Ok(self.unverified(Status::MaxIterations, &eval, reason, stats, started));
             }
             let trust = eval.linear_ok.then_some(radius);
-            let (sol, model_here) = match self.subproblem(
-                &rows,
-                &eval,
-                centre,
-                rho,
-                trust,
-                screen_time,
-                ctl,
-            ) {
+            let (sol, model_here) = match timed(&mut stats.qp_ms, || {
+                self.subproblem(&rows, &eval, centre, rho, trust, screen_time, ctl)
+            }) {
                 Ok(x) => x,
                 Err(QpFailure::Infeasible) => {
                     let reason = "joint position limits (minus the margin), velocity limits and the start / final configuration cannot all hold".to_string();
@@ -260,7 +272,9 @@ impl Problem {
             stats.max_qp_rows = stats.max_qp_rows.max(sol.rows);
             stats.max_qp_variables = stats.max_qp_variables.max(sol.variables);
             let step = (&sol.z - &eval.z).amax();
-            let trial = self.evaluate_grid(&rows, sol.z, centre);
+            let trial = timed(&mut stats.evaluation_ms, || {
+                self.evaluate_grid(&rows, sol.z, centre)
+            });
             let merit_here = eval.merit(rho);
             let predicted = model_here - sol.objective;
             let actual = merit_here - trial.merit(rho);
@@ -294,13 +308,16 @@ impl Problem {
                 }
             } else {
                 stats.rejected_steps += 1;
-                radius = (0.25 * radius).min(0.5 * step);
-                if radius < MIN_TRUST_REGION {
-                    if !screen_time {
-                        converged = true;
-                    }
+                if screen_time {
+                    // The screened model missed a clearance row the step
+                    // broke: use every row from now on, same radius.
                     screen_time = false;
-                    radius = self.options.trust_region;
+                } else {
+                    radius = (0.25 * radius).min(0.5 * step);
+                    if radius < MIN_TRUST_REGION {
+                        converged = true;
+                        radius = self.options.trust_region;
+                    }
                 }
             }
             if converged && !eval.feasible() && eval.linear_ok {

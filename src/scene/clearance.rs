@@ -50,20 +50,21 @@ pub(crate) struct PlacedShape {
 
 /// Every robot primitive in the base frame for `frames`.
 pub(crate) fn place_robot(robot: &Robot, frames: &Frames) -> Vec<PlacedShape> {
-    robot
-        .collision_shapes()
-        .iter()
-        .enumerate()
-        .map(|(index, s)| {
-            let world = s.geometry.transformed(&frames.poses[s.link]);
-            PlacedShape {
-                index,
-                bounds: geometry_bounds(&world),
-                core: Core::of_geometry(&world),
-                part: RobotPart::new(&world),
-            }
-        })
+    (0..robot.collision_shapes().len())
+        .map(|index| place_shape(robot, frames, index))
         .collect()
+}
+
+/// Robot primitive `index` in the base frame for `frames`.
+fn place_shape(robot: &Robot, frames: &Frames, index: usize) -> PlacedShape {
+    let s = &robot.collision_shapes()[index];
+    let world = s.geometry.transformed(&frames.poses[s.link]);
+    PlacedShape {
+        index,
+        bounds: geometry_bounds(&world),
+        core: Core::of_geometry(&world),
+        part: RobotPart::new(&world),
+    }
 }
 
 /// Whether a lower bound `gap` rules out a distance below `limit`: when
@@ -129,6 +130,25 @@ impl Scene {
             }
         }
         out
+    }
+
+    /// The signed distance of one (robot primitive, obstacle) pair at
+    /// `frames`, however far apart; `None` for an index out of range.
+    pub fn pair_clearance(
+        &self,
+        robot: &Robot,
+        frames: &Frames,
+        shape: usize,
+        obstacle: usize,
+    ) -> Option<Clearance> {
+        if shape >= robot.collision_shapes().len() {
+            return None;
+        }
+        let compiled = self.compiled.get(obstacle)?;
+        let placed = place_shape(robot, frames, shape);
+        let far = placed.bounds.gap(&compiled.bounds).max(0.0) + self.bounds_diameter() + 1.0;
+        let contact = obstacle_contact(&placed, compiled, far)?;
+        Some(self.clearance(robot, shape, obstacle, &contact))
     }
 
     /// `d(c.distance)/dq` at configuration `q` (whose forward kinematics is

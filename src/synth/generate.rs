@@ -18,8 +18,9 @@ use crate::synth::camera::{Camera, Intrinsics};
 use crate::synth::dataset::{self, DistributionJson, Manifest, Splits, TargetEntry, TargetRecord};
 use crate::synth::demos::{approach_axis, DemoContext, TargetDemos};
 use crate::synth::obstacles::plant_scene_file;
-use crate::synth::plant::{sample_plant, Plant};
+use crate::synth::plant::{sample_plant, Placement, Plant};
 use crate::synth::render::{box_center, render_plant, target_box, target_image};
+use crate::synth::settings::RegionAnchor;
 use crate::synth::settings::SynthSettings;
 use crate::{Error, Result};
 use image::RgbImage;
@@ -111,8 +112,21 @@ impl Generator {
         Point3::from(self.robot.tcp_pose(&self.robot.home()).translation.vector)
     }
 
+    /// Where berries go relative to the region draws (see [`RegionAnchor`]).
+    pub fn placement(&self) -> Placement {
+        match self.settings.plant.region_anchor {
+            RegionAnchor::PreGrasp => Placement {
+                origin: self.home_tcp(),
+                push_m: self.settings.demos.standoff_m,
+            },
+            RegionAnchor::Berry => Placement::at_points(),
+        }
+    }
+
     fn check_region_in_view(&self) -> Result<()> {
-        let c = Point3::from(self.settings.plant.region.center());
+        let c = self
+            .placement()
+            .berry_center(&Point3::from(self.settings.plant.region.center()));
         let inside = self
             .camera
             .project(&c)
@@ -134,8 +148,9 @@ impl Generator {
         let region = &self.settings.plant.region;
         let home = self.robot.home();
         let tcp = self.home_tcp();
+        let placement = self.placement();
         for p in std::iter::once(region.center()).chain(region.corners()) {
-            let berry = Point3::from(p);
+            let berry = placement.berry_center(&Point3::from(p));
             let axis = approach_axis(&tcp, &berry).map_err(|e| e.within("plant.region"))?;
             let target = IkTarget {
                 position: berry - axis.into_inner() * self.settings.demos.standoff_m,
@@ -174,6 +189,7 @@ impl Generator {
                 &self.camera,
                 self.settings.camera.border_px,
                 self.settings.berries_per_config,
+                &self.placement(),
                 &mut rng,
             )?;
             match self.demos_for(&plant, &mut rng) {

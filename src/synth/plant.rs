@@ -156,14 +156,14 @@ impl Leaflet {
     }
 }
 
-/// The tray (gutter) the plant grows in: an axis-aligned box.
+/// The tray (table top) under the plant: an axis-aligned box.
 #[derive(Clone, Debug)]
 pub struct Tray {
     /// Centre.
     pub center: Point3<f64>,
     /// Half extents.
     pub half_extents: Vector3<f64>,
-    /// Grey level of its plastic in [0, 1].
+    /// Brightness of its surface in [0, 1].
     pub shade: f64,
 }
 
@@ -182,15 +182,47 @@ pub struct Plant {
     pub crown: Point3<f64>,
 }
 
-/// Draw one plant with `n_berries` berries, every one visible to `camera`.
+/// How a point drawn in the plant region becomes a berry centre: pushed
+/// `push_m` further along the ray from `origin` (the home TCP), so that the
+/// drawn point is the pre-grasp point of a berry approached from home.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Placement {
+    /// Ray origin (the home TCP).
+    pub origin: Point3<f64>,
+    /// Push distance (m, >= 0); 0 places berries at the drawn points.
+    pub push_m: f64,
+}
+
+impl Placement {
+    /// Berries at the drawn points.
+    pub fn at_points() -> Placement {
+        Placement {
+            origin: Point3::origin(),
+            push_m: 0.0,
+        }
+    }
+
+    /// The berry centre for a drawn point `p` (`p` itself when it
+    /// coincides with the origin).
+    pub fn berry_center(&self, p: &Point3<f64>) -> Point3<f64> {
+        match Unit::try_new(p - self.origin, 1e-9) {
+            Some(dir) if self.push_m > 0.0 => p + dir.into_inner() * self.push_m,
+            _ => *p,
+        }
+    }
+}
+
+/// Draw one plant with `n_berries` berries, every one visible to `camera`;
+/// berry centres are the region draws moved by `placement`.
 pub fn sample_plant(
     settings: &PlantSettings,
     camera: &Camera,
     border_px: f64,
     n_berries: usize,
+    placement: &Placement,
     rng: &mut impl Rng,
 ) -> Result<Plant> {
-    let berries = sample_berries(settings, camera, border_px, n_berries, rng)?;
+    let berries = sample_berries(settings, camera, border_px, n_berries, placement, rng)?;
     let crown = sample_crown(&berries, rng);
     let tray =
         (rng.gen::<f64>() < settings.tray_probability).then(|| sample_tray(&berries, &crown, rng));
@@ -211,6 +243,7 @@ fn sample_berries(
     camera: &Camera,
     border_px: f64,
     n: usize,
+    placement: &Placement,
     rng: &mut impl Rng,
 ) -> Result<Vec<Berry>> {
     let mut berries: Vec<Berry> = Vec::with_capacity(n);
@@ -227,7 +260,7 @@ fn sample_berries(
                 berries.len()
             )));
         }
-        let b = sample_berry(settings, berries.len(), rng);
+        let b = sample_berry(settings, berries.len(), placement, rng);
         if spacing_ok(settings, &berries, &b) && berry_visible(camera, &b, border_px) {
             berries.push(b);
         }
@@ -235,15 +268,21 @@ fn sample_berries(
     Ok(berries)
 }
 
-fn sample_berry(settings: &PlantSettings, index: usize, rng: &mut impl Rng) -> Berry {
+fn sample_berry(
+    settings: &PlantSettings,
+    index: usize,
+    placement: &Placement,
+    rng: &mut impl Rng,
+) -> Berry {
     let r = &settings.region;
-    let center = Point3::from([0, 1, 2].map(|i| {
+    let drawn = Point3::from([0, 1, 2].map(|i| {
         if r.max[i] > r.min[i] {
             rng.gen_range(r.min[i]..=r.max[i])
         } else {
             r.min[i]
         }
     }));
+    let center = placement.berry_center(&drawn);
     let r_top = settings.berry_radius_m.sample(rng);
     let h = rng.gen_range(1.0..=1.25) * r_top;
     let r_tip = rng.gen_range(0.38..=0.5) * r_top;
@@ -310,24 +349,30 @@ fn sample_crown(berries: &[Berry], rng: &mut impl Rng) -> Point3<f64> {
     )
 }
 
+/// A table (tray) top below the berries, seen from above by the camera at
+/// home: its top lies 3..7 cm under the lowest berry tip, it starts just in
+/// front of the berries and runs past the crown; light plastic or wood.
 fn sample_tray(berries: &[Berry], crown: &Point3<f64>, rng: &mut impl Rng) -> Tray {
-    let front = max_coord(berries, 0) + rng.gen_range(0.035..0.05);
-    let back = crown.x + rng.gen_range(0.06..0.12);
-    let top = crown.z - 0.015;
-    let hz = rng.gen_range(0.04..0.08);
-    let hy = rng.gen_range(0.35..0.6);
+    let lowest = berries
+        .iter()
+        .map(|b| b.tip.z - b.r_tip)
+        .fold(f64::INFINITY, f64::min);
+    let nearest = berries
+        .iter()
+        .map(|b| b.center.x)
+        .fold(f64::INFINITY, f64::min);
+    let top = lowest - rng.gen_range(0.03..0.07);
+    let hz = rng.gen_range(0.015..0.03);
+    let front = nearest - rng.gen_range(0.0..0.03);
+    let back = crown.x + rng.gen_range(0.08..0.2);
     Tray {
         center: Point3::new(
             0.5 * (front + back),
             crown.y + rng.gen_range(-0.1..0.1),
             top - hz,
         ),
-        half_extents: Vector3::new(0.5 * (back - front), hy, hz),
-        shade: if rng.gen_bool(0.7) {
-            rng.gen_range(0.05..0.2)
-        } else {
-            rng.gen_range(0.75..0.95)
-        },
+        half_extents: Vector3::new(0.5 * (back - front), rng.gen_range(0.35..0.6), hz),
+        shade: rng.gen_range(0.55..0.9),
     }
 }
 
@@ -512,6 +557,7 @@ mod tests {
             &cam,
             4.0,
             n,
+            &Placement::at_points(),
             &mut ChaCha8Rng::seed_from_u64(seed),
         )
         .unwrap()
@@ -566,12 +612,34 @@ mod tests {
     }
 
     #[test]
+    fn placement_pushes_along_the_ray_from_the_origin() {
+        let p = Placement {
+            origin: Point3::new(0.38, -0.06, 0.71),
+            push_m: 0.1,
+        };
+        let drawn = Point3::new(0.66, 0.1, 0.8);
+        let b = p.berry_center(&drawn);
+        assert!(((b - drawn).norm() - 0.1).abs() < 1e-12);
+        let (u, v) = ((drawn - p.origin).normalize(), (b - p.origin).normalize());
+        assert!((u - v).norm() < 1e-12);
+        assert_eq!(Placement::at_points().berry_center(&drawn), drawn);
+    }
+
+    #[test]
     fn impossible_packing_is_a_clear_error() {
         let mut s = PlantSettings::default();
         s.region.max = s.region.min;
         s.max_berry_tries = 5;
         let cam = Camera::reference_home(&CameraSettings::default()).unwrap();
-        let e = sample_plant(&s, &cam, 4.0, 3, &mut ChaCha8Rng::seed_from_u64(1)).unwrap_err();
+        let e = sample_plant(
+            &s,
+            &cam,
+            4.0,
+            3,
+            &Placement::at_points(),
+            &mut ChaCha8Rng::seed_from_u64(1),
+        )
+        .unwrap_err();
         assert!(e.to_string().contains("could not place 3 berries"));
     }
 

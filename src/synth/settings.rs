@@ -109,12 +109,27 @@ impl Range {
     }
 }
 
+/// What [`PlantSettings::region`] bounds.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RegionAnchor {
+    /// The pre-grasp TCP points: each berry lies `demos.standoff_m` further
+    /// along the ray from the home TCP, so the demonstrations END in the
+    /// region, as the real ones do (the default).
+    #[default]
+    PreGrasp,
+    /// The berry centres themselves (demos end `standoff_m` short of it).
+    Berry,
+}
+
 /// What a plant configuration looks like.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct PlantSettings {
-    /// Where berry centres may lie (base frame).
+    /// Where the targets lie (base frame); see [`RegionAnchor`].
     pub region: Region,
+    /// Whether `region` bounds the pre-grasp points (default) or the berries.
+    pub region_anchor: RegionAnchor,
     /// Distance between any two berry centres of one configuration (m).
     pub spacing_m: Range,
     /// Shoulder (largest) radius of a berry (m).
@@ -137,6 +152,7 @@ impl Default for PlantSettings {
     fn default() -> Self {
         PlantSettings {
             region: Region::reference(),
+            region_anchor: RegionAnchor::PreGrasp,
             spacing_m: Range::new(0.05, 0.20),
             berry_radius_m: Range::new(0.011, 0.016),
             unripe_fraction: 0.2,
@@ -372,15 +388,15 @@ impl Default for DemoSettings {
             duration_s: 4.0,
             start_std_rad: 0.004,
             start_max_rad: 0.012,
-            standoff_m: 0.085,
-            position_noise_m: 0.003,
+            standoff_m: 0.10,
+            position_noise_m: 0.008,
             axis_noise_rad: 0.01,
-            axis_pitch_noise_rad: 0.1,
+            axis_pitch_noise_rad: 0.12,
             standoff_jitter_m: 0.015,
             null_space_std_rad: vec![0.005, 0.005, 0.005, 0.005, 0.005, 0.005, 0.4],
-            ik_tolerance_m: 0.002,
+            ik_tolerance_m: 0.003,
             ik_axis_tolerance_rad: 0.02,
-            null_space_gain: 0.3,
+            null_space_gain: 0.8,
             via_deviation_rad: 0.08,
             clearance_m: 0.005,
             check_stride: 3,

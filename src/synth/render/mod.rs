@@ -200,7 +200,15 @@ mod tests {
     fn box_contains_the_rendered_silhouette_of_the_target() {
         let cam = Camera::reference_home(&CameraSettings::default()).unwrap();
         let mut rng = ChaCha8Rng::seed_from_u64(4);
-        let plant = sample_plant(&PlantSettings::default(), &cam, 4.0, 4, &mut rng).unwrap();
+        let plant = sample_plant(
+            &PlantSettings::default(),
+            &cam,
+            4.0,
+            4,
+            &crate::synth::plant::Placement::at_points(),
+            &mut rng,
+        )
+        .unwrap();
         for b in &plant.berries {
             let bx = target_box(&cam, b).unwrap();
             let only = Plant {

@@ -28,7 +28,7 @@ pub enum Material {
     Stem(StemKind),
     /// Leaflet of a given green shade.
     Leaf(f64),
-    /// Tray plastic of a given grey.
+    /// Tray (table top) of a given brightness.
     Tray(f64),
 }
 
@@ -84,17 +84,7 @@ pub fn shade(material: &Material, hit: &Hit, view: &Vector3<f64>, light: &Lighti
         Material::Sepal => (mul([0.16, 0.36, 0.09], light.jitter[1]), 0.05, true),
         Material::Stem(kind) => (stem_albedo(*kind, hit, light), 0.05, false),
         Material::Leaf(shade) => (leaf_albedo(*shade, hit, light), 0.15, true),
-        Material::Tray(grey) => {
-            let g = *grey as f32
-                * (0.92
-                    + 0.16
-                        * value2(
-                            hit.local[0] as f32 * 300.0,
-                            hit.local[1] as f32 * 40.0,
-                            light.seed,
-                        ));
-            ([g, g, g * 1.02], 0.2, false)
-        }
+        Material::Tray(shade) => (tray_albedo(*shade, hit, light), 0.12, false),
     };
     let l = light.key_dir;
     let ndl = n.dot(&l);
@@ -226,6 +216,20 @@ pub fn background(x: f32, y: f32, light: &Lighting) -> Rgb {
     c = mix(c, bright, gap.clamp(0.0, 0.85));
     let c = scale(c, 0.85 + 0.3 * fine);
     mul(mul(c, light.jitter[3]), light.tint)
+}
+
+/// Light wood-like tray top: grain along x, plank seams every 9 cm along y
+/// (shape-local coordinates in metres), tinted beige.
+fn tray_albedo(shade: f64, hit: &Hit, light: &Lighting) -> [f32; 3] {
+    let (x, y) = (hit.local[0] as f32, hit.local[1] as f32);
+    let grain = 0.86 + 0.22 * fbm2(x * 18.0, y * 260.0, 3, light.seed ^ 0x7a7);
+    let seam = if (y / 0.09).rem_euclid(1.0) < 0.04 {
+        0.6
+    } else {
+        1.0
+    };
+    let g = shade as f32 * grain * seam;
+    [g, g * 0.9, g * 0.76]
 }
 
 #[cfg(test)]
