@@ -141,6 +141,8 @@ fn draw_curves(
             .configure_mesh()
             .x_desc("epoch")
             .y_desc("loss")
+            .y_label_formatter(&|v| format!("{v:.1e}"))
+            .y_labels(6)
             .draw()?;
         let train = rows.iter().map(|r| (r.epoch as f64, r.train_loss.max(lo)));
         chart
