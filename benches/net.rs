@@ -2,6 +2,7 @@
 //! normalisation, network, covariance decoding) per iteration, with the
 //! default-size cVAE (the shipped `models/default` when present, else a
 //! freshly initialised network of the same size). Target: <= 10 ms.
+//! Also one tp1 training step (batch 5).
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use dpmp::net::{Arch, Model, ModelConfig, Network};
@@ -51,5 +52,28 @@ fn inference(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, inference);
+/// One tp1 training step of the default-size cVAE (batch 5: encoder and
+/// decoder forward, reconstruction loss, backward) — the cost that
+/// dominates training.
+fn tp1_step(c: &mut Criterion) {
+    let device = candle_core::Device::Cpu;
+    let network = Network::new(ModelConfig::new("bench", Arch::Cvae), 0, &device).expect("network");
+    let images = candle_core::Tensor::randn(0f32, 0.5, (5, 3, 128, 128), &device).expect("images");
+    let conditions =
+        candle_core::Tensor::zeros((5, 2), candle_core::DType::F32, &device).expect("conditions");
+    let mut group = c.benchmark_group("train");
+    group.sample_size(10);
+    group.bench_function("tp1_step_batch5", |b| {
+        b.iter(|| {
+            let enc = network.encode(&images, true).expect("encode");
+            let features = network.features(&enc.mu, &conditions).expect("features");
+            let recon = network.decode(&features).expect("decode").expect("decoder");
+            let loss = dpmp::train::losses::reconstruction_loss(&recon, &images).expect("loss");
+            black_box(loss.backward().expect("backward"))
+        })
+    });
+    group.finish();
+}
+
+criterion_group!(benches, inference, tp1_step);
 criterion_main!(benches);

@@ -1,11 +1,21 @@
 #!/usr/bin/env bash
 # Train every dPMP variant (Direct, AE, VAE, cVAE, each AE/VAE/cVAE also with
-# latent tuning) on one generated dataset, evaluate each on the test split,
-# and copy the chosen default (l-dPMP-cVAE unless DEFAULT says otherwise) to
-# models/default. Usage:
+# latent tuning) on one generated dataset with the same settings, evaluate
+# each on the test split, print the comparison table, and copy the chosen
+# default (l-dPMP-cVAE unless DEFAULT says otherwise) to models/default.
+#
+# A latent-tuning variant NAME-lt is the finished NAME run (tp1 + tp2)
+# extended by tp3 (`--latent-tuning --resume`): bit-identical to training it
+# from scratch (tp1/tp2 are the same seeded phases), at the cost of tp3 only.
+# Its recorded training time includes tp1 + tp2.
+#
+# Usage:
 #   scripts/train_all.sh [DATA_DIR] [SEED]
 # Environment: EPOCHS_TP1, EPOCHS_TP2, EPOCHS_TP3, BATCH, LR, ALPHA, PATIENCE,
-# DEFAULT (a model name below, e.g. cvae-lt), OUT_ROOT (default models/variants).
+# DEFAULT (a model name below, e.g. cvae-lt), OUT_ROOT (default models/variants),
+# MODELS (space-separated subset and order, default "cvae cvae-lt ae ae-lt
+# vae vae-lt direct"), FORCE=1 (retrain models whose evaluation exists),
+# BIN (the dpmp binary; default: build and use target/release/dpmp).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -20,50 +30,79 @@ LR="${LR:-1e-4}"
 ALPHA="${ALPHA:-1.0}"
 PATIENCE="${PATIENCE:-10}"
 DEFAULT="${DEFAULT:-cvae-lt}"
+MODELS="${MODELS:-cvae cvae-lt ae ae-lt vae vae-lt direct}"
+ALL="direct ae ae-lt vae vae-lt cvae cvae-lt"
 
 if [ ! -f "$DATA/manifest.json" ]; then
   echo "no dataset at $DATA (generate one with: dpmp data generate --out $DATA)" >&2
   exit 2
 fi
 
-cargo build --release
-BIN=target/release/dpmp
+if [ -z "${BIN:-}" ]; then
+  cargo build --release
+  BIN=target/release/dpmp
+fi
 COMMON=(--data "$DATA" --seed "$SEED" --epochs-tp1 "$EPOCHS_TP1" --epochs-tp2 "$EPOCHS_TP2"
         --epochs-tp3 "$EPOCHS_TP3" --batch "$BATCH" --lr "$LR" --alpha "$ALPHA" --patience "$PATIENCE")
 
-train() {  # name arch [--latent-tuning]
-  local name="$1" arch="$2"; shift 2
-  echo "== training $name" >&2
-  "$BIN" train --arch "$arch" --out "$OUT_ROOT/$name" "${COMMON[@]}" "$@" >"$OUT_ROOT/$name.train.json"
-  "$BIN" eval --model "$OUT_ROOT/$name" --data "$DATA" --split test --format json \
-    --out "$OUT_ROOT/$name/eval-test" >"$OUT_ROOT/$name.eval.json"
+evaluate() {  # name
+  "$BIN" eval --model "$OUT_ROOT/$1" --data "$DATA" --split test --format json \
+    --out "$OUT_ROOT/$1/eval-test" >"$OUT_ROOT/$1.eval.json.tmp"
+  mv "$OUT_ROOT/$1.eval.json.tmp" "$OUT_ROOT/$1.eval.json"
+}
+
+train_one() {  # name
+  local name="$1" arch="${1%-lt}"
+  if [ -f "$OUT_ROOT/$name.eval.json" ] && [ "${FORCE:-0}" != 1 ]; then
+    echo "== $name: already trained and evaluated (FORCE=1 retrains)" >&2
+    return
+  fi
+  echo "== training $name ($(date -u +%H:%M:%S))" >&2
+  if [ "$name" = "$arch" ]; then
+    rm -rf "$OUT_ROOT/$name"
+    "$BIN" train --arch "$arch" --out "$OUT_ROOT/$name" "${COMMON[@]}" >"$OUT_ROOT/$name.train.json"
+  else
+    # Extend the finished run without latent tuning by tp3.
+    if [ ! -f "$OUT_ROOT/$arch/train_state/state.json" ]; then
+      train_one "$arch"
+    fi
+    rm -rf "$OUT_ROOT/$name"
+    cp -r "$OUT_ROOT/$arch" "$OUT_ROOT/$name"
+    rm -rf "$OUT_ROOT/$name/eval-test"
+    "$BIN" train --arch "$arch" --latent-tuning --resume --out "$OUT_ROOT/$name" "${COMMON[@]}" \
+      >"$OUT_ROOT/$name.train.json"
+  fi
+  evaluate "$name"
 }
 
 mkdir -p "$OUT_ROOT"
-train direct direct
-for arch in ae vae cvae; do
-  train "$arch" "$arch"
-  train "$arch-lt" "$arch" --latent-tuning
+for name in $MODELS; do
+  train_one "$name"
 done
 
-echo "| model | Eq. 7 total | final TCP position error (m) | orientation | +3σ position (m) | Davies–Bouldin |"
-echo "|---|---|---|---|---|---|"
-for name in direct ae ae-lt vae vae-lt cvae cvae-lt; do
-  python3 - "$OUT_ROOT/$name.eval.json" "$name" <<'PY'
+echo "| model | Eq. 7 total | final TCP position error (m) | orientation (Eq. 9) | -3σ / +3σ position (m) | Davies–Bouldin | training time (s) |"
+echo "|---|---|---|---|---|---|---|"
+for name in $ALL; do
+  [ -f "$OUT_ROOT/$name.eval.json" ] || continue
+  python3 - "$OUT_ROOT/$name.eval.json" "$OUT_ROOT/$name/config.json" "$name" <<'PY'
 import json, sys
 r = json.load(open(sys.argv[1]))
+c = json.load(open(sys.argv[2]))
 db = r["table2"]["davies_bouldin"]
-print(f"| {sys.argv[2]} | {r['eq7_total']:.3e} | {r['mean_final_position_error_m']:.4f} | "
-      f"{r['table3']['mean']['orientation']:.4f} | {r['table3']['plus_3sigma']['position_m']:.4f} | "
-      f"{'n/a' if db is None else f'{db:.3f}'} |")
+t3 = r["table3"]
+print(f"| {sys.argv[3]} | {r['eq7_total']:.3e} | {t3['mean']['position_m']:.4f} | "
+      f"{t3['mean']['orientation']:.4f} | {t3['minus_3sigma']['position_m']:.4f} / {t3['plus_3sigma']['position_m']:.4f} | "
+      f"{'n/a' if db is None else f'{db:.3f}'} | {c['training']['seconds']:.0f} |")
 PY
 done
 
-rm -rf models/default.tmp
-mkdir -p models/default.tmp
-cp "$OUT_ROOT/$DEFAULT/model.safetensors" "$OUT_ROOT/$DEFAULT/config.json" \
-   "$OUT_ROOT/$DEFAULT/loss_curves.png" models/default.tmp/
-cp -r "$OUT_ROOT/$DEFAULT/eval-test" models/default.tmp/eval-test
-rm -rf models/default
-mv models/default.tmp models/default
-echo "models/default <- $OUT_ROOT/$DEFAULT" >&2
+if [ -f "$OUT_ROOT/$DEFAULT.eval.json" ]; then
+  rm -rf models/default.tmp
+  mkdir -p models/default.tmp
+  cp "$OUT_ROOT/$DEFAULT/model.safetensors" "$OUT_ROOT/$DEFAULT/config.json" \
+     "$OUT_ROOT/$DEFAULT/loss_curves.png" "$OUT_ROOT/$DEFAULT/metrics.csv" models/default.tmp/
+  cp -r "$OUT_ROOT/$DEFAULT/eval-test" models/default.tmp/eval-test
+  rm -rf models/default
+  mv models/default.tmp models/default
+  echo "models/default <- $OUT_ROOT/$DEFAULT" >&2
+fi

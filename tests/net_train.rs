@@ -89,6 +89,34 @@ fn training_is_deterministic_and_resumes_exactly() {
     assert_eq!(records(&a).len(), records(&r).len());
 }
 
+#[test]
+fn latent_tuning_extends_a_finished_run_to_the_same_weights() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    net_common::write_dataset(&data, 3, 3, 32, 24, 3);
+    let settings = |out: &Path, latent_tuning: bool| {
+        let mut s = net_common::tiny_settings(&data, out, Arch::Ae);
+        s.latent_tuning = latent_tuning;
+        s.seed = 5;
+        s
+    };
+    let full = dir.path().join("full");
+    train(&settings(&full, true)).unwrap();
+    let ext = dir.path().join("ext");
+    train(&settings(&ext, false)).unwrap();
+    assert_ne!(weights(&full), weights(&ext));
+    let mut s = settings(&ext, true);
+    s.resume = true;
+    let outcome = train(&s).unwrap();
+    assert!(outcome.summary.epochs.contains_key("tp3"));
+    assert_eq!(weights(&full), weights(&ext));
+    assert_eq!(records(&full).len(), records(&ext).len());
+    // The tp3 run cannot be resumed as a run without latent tuning.
+    let mut s = settings(&full, false);
+    s.resume = true;
+    assert_eq!(train(&s).unwrap_err().field(), Some("resume"));
+}
+
 /// A toy forward kinematics for evaluation: position = first three joints.
 fn toy_fk(q: &[f64]) -> Isometry3<f64> {
     Isometry3::from_parts(

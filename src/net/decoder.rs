@@ -4,15 +4,16 @@
 //! normalised to [-1, 1]).
 
 use super::config::ModelConfig;
+use super::conv::Conv3x3;
 use candle_core::{Module, Result, Tensor};
-use candle_nn::{Conv2d, Conv2dConfig, Linear, VarBuilder};
+use candle_nn::{Linear, VarBuilder};
 
 /// The convolutional decoder (mirror of the encoder).
 #[derive(Clone, Debug)]
 pub struct Decoder {
     fc: Linear,
-    ups: Vec<Conv2d>,
-    out: Conv2d,
+    ups: Vec<Conv3x3>,
+    out: Conv3x3,
     channels: usize,
     side: usize,
     slope: f64,
@@ -27,22 +28,16 @@ impl Decoder {
         let first = channels[0];
         let fc = candle_nn::linear(config.feature_dim(), first * side * side, vb.pp("fc"))?;
         channels.push(channels[channels.len() - 1]);
-        let cfg = Conv2dConfig {
-            padding: 1,
-            ..Default::default()
-        };
         let mut ups = Vec::with_capacity(config.encoder_channels.len());
         for i in 0..config.encoder_channels.len() {
-            ups.push(candle_nn::conv2d(
+            ups.push(Conv3x3::new(
                 channels[i],
                 channels[i + 1],
-                3,
-                cfg,
                 vb.pp(format!("up{i}")),
             )?);
         }
         let last = channels[channels.len() - 1];
-        let out = candle_nn::conv2d(last, 3, 3, cfg, vb.pp("out"))?;
+        let out = Conv3x3::new(last, 3, vb.pp("out"))?;
         Ok(Decoder {
             fc,
             ups,
@@ -57,16 +52,15 @@ impl Decoder {
     pub fn forward(&self, features: &Tensor) -> Result<Tensor> {
         let batch = features.dim(0)?;
         let x = self.fc.forward(features)?;
-        let mut x = candle_nn::ops::leaky_relu(&x, self.slope)?.reshape((
+        let mut x = super::ops::leaky_relu(&x, self.slope)?.reshape((
             batch,
             self.channels,
             self.side,
             self.side,
         ))?;
         for conv in &self.ups {
-            let (_, _, h, w) = x.dims4()?;
-            x = x.upsample_nearest2d(2 * h, 2 * w)?;
-            x = candle_nn::ops::leaky_relu(&conv.forward(&x)?, self.slope)?;
+            x = super::ops::upsample2x(&x)?;
+            x = super::ops::leaky_relu(&conv.forward(&x)?, self.slope)?;
         }
         self.out.forward(&x)?.tanh()
     }

@@ -3,13 +3,14 @@
 //! latent vector (two, mu and log-variance, for variational encoders).
 
 use super::config::ModelConfig;
+use super::conv::Conv3x3;
 use candle_core::{Module, ModuleT, Result, Tensor};
-use candle_nn::{BatchNorm, Conv2d, Conv2dConfig, Linear, VarBuilder};
+use candle_nn::{BatchNorm, Linear, VarBuilder};
 
 /// One encoder block: conv 3x3 (same padding), LeakyReLU, max-pool 2, batch-norm.
 #[derive(Clone, Debug)]
 pub struct ConvBlock {
-    conv: Conv2d,
+    conv: Conv3x3,
     norm: BatchNorm,
     slope: f64,
 }
@@ -17,12 +18,8 @@ pub struct ConvBlock {
 impl ConvBlock {
     /// Build a block reading `inputs` channels and writing `outputs`.
     pub fn new(inputs: usize, outputs: usize, slope: f64, vb: VarBuilder) -> Result<ConvBlock> {
-        let cfg = Conv2dConfig {
-            padding: 1,
-            ..Default::default()
-        };
         Ok(ConvBlock {
-            conv: candle_nn::conv2d(inputs, outputs, 3, cfg, vb.pp("conv"))?,
+            conv: Conv3x3::new(inputs, outputs, vb.pp("conv"))?,
             norm: candle_nn::batch_norm(outputs, 1e-5, vb.pp("bn"))?,
             slope,
         })
@@ -31,7 +28,7 @@ impl ConvBlock {
     /// `(B, C, H, W) -> (B, C', H/2, W/2)`; `train` selects batch statistics.
     pub fn forward(&self, x: &Tensor, train: bool) -> Result<Tensor> {
         let x = self.conv.forward(x)?;
-        let x = candle_nn::ops::leaky_relu(&x, self.slope)?;
+        let x = super::ops::leaky_relu(&x, self.slope)?;
         let x = x.max_pool2d(2)?;
         self.norm.forward_t(&x, train)
     }

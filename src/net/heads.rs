@@ -40,7 +40,7 @@ impl JointHead {
         for (i, layer) in self.layers.iter().enumerate() {
             x = layer.forward(&x)?;
             if i < last {
-                x = candle_nn::ops::leaky_relu(&x, self.slope)?;
+                x = super::ops::leaky_relu(&x, self.slope)?;
             }
         }
         Ok(x)

@@ -14,13 +14,16 @@
 
 pub mod checkpoint;
 pub mod config;
+pub mod conv;
 pub mod covariance;
 pub mod decoder;
 pub mod encoder;
 pub mod heads;
 pub mod models;
+pub mod ops;
 pub mod predict;
 pub mod preprocess;
+pub mod resize;
 
 pub use config::{Arch, ModelConfig, OutputNorm};
 pub use covariance::CovarianceDecoder;

@@ -65,12 +65,11 @@ impl Model {
         target_box: [f64; 4],
         mask_applied: bool,
     ) -> Result<Prepared> {
-        preprocess::prepare(
-            &image.to_rgb8(),
-            target_box,
-            mask_applied,
-            &self.config().preprocess,
-        )
+        let config = &self.config().preprocess;
+        match image.as_rgb8() {
+            Some(rgb) => preprocess::prepare(rgb, target_box, mask_applied, config),
+            None => preprocess::prepare(&image.to_rgb8(), target_box, mask_applied, config),
+        }
     }
 
     /// Predict the weight prior for an image and its target box

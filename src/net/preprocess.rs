@@ -1,10 +1,12 @@
 //! Image preprocessing, the ONE path used by training, evaluation and
 //! serving: validate the target box, paint it as a white filled rectangle
 //! unless the caller already masked the image, resize to the network's
-//! square input (area averaging, `image::imageops::thumbnail`), normalise to `[-1, 1]` (CHW, f32), and compute the cVAE
+//! square input (exact area averaging, [`super::resize`]), normalise to
+//! `[-1, 1]` (CHW, f32), and compute the cVAE
 //! condition (box centre divided by the image width and height; the paper's
 //! `/ [640, 480]` for the dataset's VGA images).
 
+use super::resize::{box_pixels, resize_normalise, Paint};
 use crate::{Error, Result};
 use image::{Rgb, RgbImage};
 use serde::{Deserialize, Serialize};
@@ -108,16 +110,18 @@ pub fn box_condition(target_box: [f64; 4], width: u32, height: u32) -> [f32; 2] 
 /// Paint the box (pixels whose centres lie inside it) with `colour`.
 pub fn paint_box(image: &mut RgbImage, target_box: [f64; 4], colour: [u8; 3]) {
     let (w, h) = image.dimensions();
-    let lo = |v: f64| (v - 0.5).ceil().max(0.0) as u32;
-    let hi = |v: f64, n: u32| ((v - 0.5).floor().max(-1.0) as i64 + 1).min(i64::from(n)) as u32;
-    for y in lo(target_box[1])..hi(target_box[3], h) {
-        for x in lo(target_box[0])..hi(target_box[2], w) {
-            image.put_pixel(x, y, Rgb(colour));
+    let [x0, y0, x1, y1] = box_pixels(target_box, w, h);
+    for y in y0..y1 {
+        for x in x0..x1 {
+            image.put_pixel(x as u32, y as u32, Rgb(colour));
         }
     }
 }
 
-/// Preprocess one image with its target box (the single shared path).
+/// Preprocess one image with its target box (the single shared path): the
+/// box is painted on the fly while area-averaging to the input size
+/// ([`resize_normalise`]), so the caller's image is neither copied nor
+/// changed.
 pub fn prepare(
     image: &RgbImage,
     target_box: [f64; 4],
@@ -129,30 +133,14 @@ pub fn prepare(
         return Err(Error::invalid("image", "image is empty"));
     }
     validate_box(target_box, width, height)?;
-    let side = config.input_size as u32;
-    let resized = if mask_applied {
-        image::imageops::thumbnail(image, side, side)
-    } else {
-        let mut painted = image.clone();
-        paint_box(&mut painted, target_box, config.box_colour);
-        image::imageops::thumbnail(&painted, side, side)
-    };
+    let paint = (!mask_applied).then(|| Paint {
+        pixels: box_pixels(target_box, width, height),
+        colour: config.box_colour,
+    });
     Ok(Prepared {
-        pixels: normalise(&resized, config),
+        pixels: resize_normalise(image, config.input_size, paint, config.scale, config.shift),
         condition: box_condition(target_box, width, height),
     })
-}
-
-fn normalise(image: &RgbImage, config: &PreprocessConfig) -> Vec<f32> {
-    let (w, h) = image.dimensions();
-    let plane = (w * h) as usize;
-    let mut out = vec![0.0f32; 3 * plane];
-    for (i, pixel) in image.pixels().enumerate() {
-        for c in 0..3 {
-            out[c * plane + i] = f32::from(pixel.0[c]) / 255.0 * config.scale + config.shift;
-        }
-    }
-    out
 }
 
 #[cfg(test)]

@@ -104,6 +104,15 @@ pub fn plot_loss_curves(records: &[EpochRecord], path: &Path) -> Result<()> {
     })
 }
 
+/// Short tick text: three decimals down to 0.01, scientific below.
+fn tick_label(v: f64) -> String {
+    if v == 0.0 || v.abs() >= 0.01 {
+        format!("{v:.3}")
+    } else {
+        format!("{v:.1e}")
+    }
+}
+
 fn draw_curves(
     records: &[EpochRecord],
     path: &Path,
@@ -126,7 +135,7 @@ fn draw_curves(
         let lo = positive.iter().cloned().fold(f64::INFINITY, f64::min);
         let hi = positive.iter().cloned().fold(0.0, f64::max);
         let (lo, hi) = if lo.is_finite() && hi > lo {
-            (lo * 0.8, hi * 1.25)
+            (lo - 0.05 * (hi - lo), hi + 0.05 * (hi - lo))
         } else {
             (1e-6, 1.0)
         };
@@ -136,11 +145,13 @@ fn draw_curves(
             .margin(10)
             .x_label_area_size(30)
             .y_label_area_size(60)
-            .build_cartesian_2d(0f64..epochs, (lo..hi).log_scale())?;
+            .build_cartesian_2d(0f64..epochs, lo..hi)?;
         chart
             .configure_mesh()
             .x_desc("epoch")
             .y_desc("loss")
+            .y_label_formatter(&|v| tick_label(*v))
+            .y_labels(6)
             .draw()?;
         let train = rows.iter().map(|r| (r.epoch as f64, r.train_loss.max(lo)));
         chart

@@ -118,9 +118,12 @@ impl<'a> PhaseContext<'a> {
         for chunk in indices.chunks(EVAL_BATCH) {
             let batch = make_batch(samples, chunk, network.config(), network.device())?;
             let enc = network.encode(&batch.images, false).map_err(candle_error)?;
-            mus.push(enc.mu);
+            // Detached: tp2 must not back-propagate into the frozen encoder
+            // (that would redo the encoder's backward pass on every image at
+            // every step).
+            mus.push(enc.mu.detach());
             if let Some(lv) = enc.logvar {
-                logvars.push(lv);
+                logvars.push(lv.detach());
             }
         }
         let mu = Tensor::cat(&mus, 0).map_err(candle_error)?;

@@ -164,12 +164,13 @@ impl TrainSettings {
         }
     }
 
-    /// Settings that must match for a resume (epoch counts may change).
+    /// Settings that must match for a resume (epoch counts may change, and
+    /// a finished run without latent tuning may be extended by tp3: its
+    /// tp1 and tp2 are exactly those of the run with latent tuning).
     fn fingerprint(&self, manifest_sha256: &str) -> String {
         format!(
-            "{}|{}|{}|{}|{}|{}|{}|{}|{:?}|{}",
+            "{}|{}|{}|{}|{}|{}|{}|{:?}|{}",
             self.arch.as_str(),
-            self.latent_tuning,
             self.seed,
             self.batch,
             self.lr,
@@ -197,6 +198,7 @@ struct ResumeState {
     fingerprint: String,
     phase_index: usize,
     next_epoch: usize,
+    #[serde(with = "infinity_as_null")]
     best_val: f64,
     bad_epochs: usize,
     adam_steps: u64,
@@ -207,6 +209,23 @@ struct ResumeState {
 }
 
 const STATE_DIR: &str = "train_state";
+
+/// JSON has no infinity: "no best loss yet" (`f64::INFINITY`) is `null`.
+mod infinity_as_null {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
+        if v.is_finite() {
+            s.serialize_f64(*v)
+        } else {
+            s.serialize_none()
+        }
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+        Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::INFINITY))
+    }
+}
 
 /// Train a model as the settings say; the best weights end in `settings.out`.
 pub fn train(settings: &TrainSettings) -> Result<TrainOutcome> {
@@ -319,6 +338,7 @@ impl<'a> Run<'a> {
                     ),
                 ));
             }
+            check_resumable_phases(&state, &settings.phases(), &state_path)?;
             let current = state_dir.join(format!("current-{}.safetensors", state.tag));
             checkpoint::assign(network, &read_tensors(&current)?, &current)?;
             let best_path = state_dir.join(format!("best-{}.safetensors", state.tag));
@@ -551,6 +571,28 @@ impl<'a> Run<'a> {
             summary: self.summary(),
         })
     }
+}
+
+/// A resumed state must only hold phases this run trains (a tp3 run cannot
+/// be resumed without `--latent-tuning`).
+fn check_resumable_phases(state: &ResumeState, phases: &[Phase], path: &Path) -> Result<()> {
+    let names: Vec<&str> = phases.iter().map(|p| p.name()).collect();
+    if let Some(extra) = state.epochs.keys().find(|k| !names.contains(&k.as_str())) {
+        return Err(Error::invalid(
+            "resume",
+            format!(
+                "{} already trained phase {extra}, which these settings do not run (--latent-tuning?)",
+                path.display()
+            ),
+        ));
+    }
+    if state.phase_index > phases.len() {
+        return Err(Error::invalid(
+            "resume",
+            format!("{} is past the phases of these settings", path.display()),
+        ));
+    }
+    Ok(())
 }
 
 fn progress_bar(show: bool, epochs: usize, phase: Phase) -> ProgressBar {
