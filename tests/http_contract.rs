@@ -44,27 +44,6 @@ fn router_routes_equal_spec_paths() {
     }
 }
 
-/// The schema of `status`'s JSON answer of `METHOD path` in the spec.
-fn response_schema<'a>(spec: &'a Value, method: &str, path: &str, status: u16) -> &'a Value {
-    let op = &spec["paths"][path][method];
-    let mut response = &op["responses"][status.to_string()];
-    if let Some(r) = response.get("$ref") {
-        let pointer = r.as_str().unwrap().trim_start_matches('#');
-        response = spec.pointer(pointer).unwrap();
-    }
-    &response["content"]["application/json"]["schema"]
-}
-
-fn assert_valid(spec: &Value, method: &str, path: &str, status: u16, body: &Value) {
-    let schema = response_schema(spec, method, path, status);
-    assert!(
-        !schema.is_null(),
-        "{method} {path} {status} is not documented"
-    );
-    let errors = validate(spec, schema, body);
-    assert!(errors.is_empty(), "{method} {path} {status}: {errors:#?}");
-}
-
 #[test]
 fn real_responses_validate_against_the_spec() {
     let spec = openapi();

@@ -74,3 +74,25 @@ pub fn openapi() -> Value {
     let yaml: serde_yaml::Value = serde_yaml::from_str(&text).unwrap();
     serde_json::to_value(yaml).unwrap()
 }
+
+/// The schema of `status`'s JSON answer of `METHOD path` in the spec.
+pub fn response_schema<'a>(spec: &'a Value, method: &str, path: &str, status: u16) -> &'a Value {
+    let op = &spec["paths"][path][method];
+    let mut response = &op["responses"][status.to_string()];
+    if let Some(r) = response.get("$ref") {
+        let pointer = r.as_str().unwrap().trim_start_matches('#');
+        response = spec.pointer(pointer).unwrap();
+    }
+    &response["content"]["application/json"]["schema"]
+}
+
+/// Panic unless `body` validates against the spec's schema of that answer.
+pub fn assert_valid(spec: &Value, method: &str, path: &str, status: u16, body: &Value) {
+    let schema = response_schema(spec, method, path, status);
+    assert!(
+        !schema.is_null(),
+        "{method} {path} {status} is not documented"
+    );
+    let errors = schema::validate(spec, schema, body);
+    assert!(errors.is_empty(), "{method} {path} {status}: {errors:#?}");
+}
