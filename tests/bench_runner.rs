@@ -3,11 +3,10 @@
 //! through `run_suite`, checking the report files and the headline claims
 //! on this small set.
 
-use dpmp::bench::make_problems::make_one;
+use dpmp::bench::make_problems::{generator, make_one};
 use dpmp::bench::methods::penalty_gd::PenaltyGd;
 use dpmp::bench::methods::rejection::Rejection;
 use dpmp::bench::{method_from_name, run_suite, Method, RunSettings};
-use dpmp::promp::{Basis, PrompConfig};
 use dpmp::robot::Robot;
 
 fn methods() -> Vec<Box<dyn Method>> {
@@ -26,7 +25,7 @@ fn methods() -> Vec<Box<dyn Method>> {
 #[test]
 fn smoke_run_of_five_problems_writes_a_consistent_report() {
     let robot = Robot::panda().unwrap();
-    let basis = Basis::new(&PrompConfig::default()).unwrap();
+    let generator = generator(&robot).unwrap();
     let problems_dir = tempfile::tempdir().unwrap();
     let out = tempfile::tempdir().unwrap();
     for (k, (category, i)) in [
@@ -39,7 +38,7 @@ fn smoke_run_of_five_problems_writes_a_consistent_report() {
     .into_iter()
     .enumerate()
     {
-        let p = make_one(&robot, &basis, category, i, 900 + k as u64).unwrap();
+        let p = make_one(&generator, category, i, 900 + k as u64).unwrap();
         p.save(problems_dir.path()).unwrap();
     }
     // A broken file is counted as an error, never aborts the run.

@@ -1,59 +1,85 @@
-//! The seeded problem generator behind `dpmp bench make-problems`.
+//! The seeded problem generator behind `dpmp bench make-problems`, drawing
+//! from the synthetic generator ([`crate::synth`], via [`super::synth_target`]).
 //!
-//! Every problem uses a real-like prior (the [`crate::promp::example`]
-//! demonstrations from home towards a berry, fitted per demonstration and
-//! turned into a full Gaussian over the 7 x 8 weights), starts at the prior
-//! mean's start configuration and asks for the TCP to end at the prior
-//! mean's final TCP position (so the un-optimised mean satisfies the start
-//! and the goal, and every difficulty comes from the category). Berries are
-//! spheres or [`ObstacleShape::Berry`] bodies with stems, stems capsules,
-//! placed relative to the prior mean's TCP path (computed with the Panda's
-//! FK). Category by category:
+//! Every problem starts from one synthetic target: a plant (all its
+//! obstacles: berries, stems, leaflets, tray), 10 demonstrations towards one
+//! of its berries and the full Gaussian fitted to their ProMP weights (the
+//! prior). The request starts at the prior mean's start configuration (home
+//! up to the demonstrations' start noise) and asks for the TCP to end within
+//! 1 cm of the demonstrations' mean pre-grasp TCP position. Category by
+//! category:
 //!
-//! - `easy`: a cluster 0.25-0.4 m away from the whole arm along the mean.
-//! - `on-path`: a berry (and its stem) centred on the mean TCP path between
-//!   45 % and 75 % of the motion, plus neighbours: the optimiser must deviate.
-//! - `dense`: 12 berries with stems 7-12 cm around the goal.
-//! - `velocity`: durations of 0.5-0.7 s, so the mean breaks velocity limits.
-//! - `joint-limit`: demonstrations whose joint 6 ends at 3.70-3.80 rad, at
-//!   or beyond its 3.7525 rad upper limit (as in the real data).
-//! - `degenerate-prior`: 3 demonstrations (rank-2 covariance) or an
-//!   indefinite covariance (a symmetric perturbation beyond Cauchy-Schwarz).
+//! - `easy`: the plant as drawn.
+//! - `on-path`: plus a small berry (and its stem) at the prior mean's TCP
+//!   path (centre within one radius + 3 cm of it) at a phase where the
+//!   mean's start and final poses stay clear; the mean is checked to
+//!   violate the clearance, so the optimiser must deviate.
+//! - `dense`: plus 6 stemmed berries 7-14 cm around the goal.
+//! - `velocity`: the shortest duration at which some candidate still keeps
+//!   the velocity limits, times 1.02-1.10: the limits bind.
+//! - `joint-limit`: a joint-limit margin that puts joint 6's effective upper
+//!   limit 1-10 mrad above the witness' highest joint-6 position (joint 6
+//!   near its upper limit, as in the real data); every candidate reaching
+//!   higher violates it.
+//! - `degenerate-prior`: the Gaussian of only 3 demonstrations (rank 2,
+//!   even index) or an indefinite covariance (a symmetric perturbation
+//!   beyond Cauchy-Schwarz, odd index).
 //! - `infeasible`: a sphere around the TCP at the start configuration
-//!   (start in collision) or around the goal (goal inside an obstacle).
+//!   (start in collision, even index) or around the goal (goal inside an
+//!   obstacle, odd index).
 //!
-//! Feasible categories are checked at generation: the start is at least
-//! 5 cm clear of every obstacle and no obstacle comes within 5 cm of the
-//! goal; a draw that fails is replaced by the next sub-seed.
+//! Checks at generation, on the request exactly as written (floats rounded
+//! to 10 significant digits first): it parses and validates like the
+//! runner's; a feasible problem has a *witness* ([`super::witness`]) — the
+//! prior mean, a demonstration, or a detour of the mean (a smooth bump of
+//! ±0.1/0.2 rad at mid-motion on joint 1, 2 or 4, fitted into the basis),
+//! pinned to the start, that passes the dense verification of every
+//! constraint; an infeasible one is infeasible
+//! by a geometric certificate (the start configuration penetrates the
+//! sphere, or the sphere contains the whole goal-tolerance ball). A draw
+//! that fails is replaced by the next sub-seed.
 
 use super::problem_file::{Expect, Meta, ProblemFile, CATEGORIES};
-use crate::optim::example::random_unit;
-use crate::promp::example::{demonstrations, example_distribution, TYPICAL_FINAL};
-use crate::promp::{fit_weights, Basis, PrompConfig, WeightDistribution};
+use super::synth_target::{bench_generator, draw_target, SynthTarget};
+use super::witness::{find_witness, pin_start, reports, validated};
+use crate::optim::example::{random_unit, tcp_path};
+use crate::promp::{fit_weights, Basis, WeightDistribution};
 use crate::robot::Robot;
 use crate::scene::{Obstacle, ObstacleShape, Scene};
+use crate::synth::demos::via_bump;
+use crate::synth::generate::Generator;
 use crate::{Error, Result};
-use nalgebra::{DMatrix, DVector, Point3, Vector3};
+use nalgebra::{DMatrix, DVector, Vector3};
+use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use serde_json::json;
+use rayon::prelude::*;
+use serde_json::{json, Value};
 
 /// Generator name written into every file's `meta.generator`.
-pub const GENERATOR: &str = "dpmp bench make-problems v1";
+pub const GENERATOR: &str = "dpmp bench make-problems v2 (synth)";
 /// Required clearance of every generated problem (m).
 pub const CLEARANCE_M: f64 = 0.02;
 /// Goal tolerance of every generated problem (m).
 pub const GOAL_TOLERANCE_M: f64 = 0.01;
-const DEMOS: usize = 12;
-const ATTEMPTS: u64 = 64;
+/// Significant digits kept in the written floats.
+pub const SIGNIFICANT_DIGITS: usize = 10;
+const ATTEMPTS: u64 = 48;
+/// Added to a problem's seed when no draw of its own seed passes.
+const SPARE_SEED_OFFSET: u64 = 5_000;
+const PLACEMENTS_PER_DRAW: usize = 8;
+const JOINT6: usize = 5;
 
-/// Settings of [`make_problems`].
+/// Settings of [`make_problems`] (a problem whose seed yields no draw that
+/// passes the checks is drawn from its spare seed, `seed + 5000`, instead).
 #[derive(Clone, Debug)]
 pub struct MakeSettings {
     /// Master seed: problem `i` of category `c` uses `seed * 10_000 + c * 100 + i`.
     pub seed: u64,
     /// Problems per category (7 categories).
     pub per_category: usize,
+    /// Show a progress bar on stderr.
+    pub progress: bool,
 }
 
 impl Default for MakeSettings {
@@ -61,20 +87,21 @@ impl Default for MakeSettings {
         MakeSettings {
             seed: 1,
             per_category: 9,
+            progress: false,
         }
     }
 }
 
-/// Generate `7 * per_category` problems, deterministic in `settings.seed`.
-pub fn make_problems(robot: &Robot, settings: &MakeSettings) -> Result<Vec<ProblemFile>> {
+/// Generate `7 * per_category` problems on the rayon pool, deterministic
+/// in `settings.seed` (each problem has its own seed; the order is fixed).
+pub fn make_problems(generator: &Generator, settings: &MakeSettings) -> Result<Vec<ProblemFile>> {
     if settings.per_category == 0 || settings.per_category > 100 {
         return Err(Error::invalid(
             "per_category",
             format!("must be in 1..=100, got {}", settings.per_category),
         ));
     }
-    let basis = Basis::new(&PrompConfig::default())?;
-    let mut out = Vec::new();
+    let mut jobs = Vec::new();
     for (c, category) in CATEGORIES.iter().enumerate() {
         for i in 0..settings.per_category {
             let seed = settings
@@ -82,96 +109,152 @@ pub fn make_problems(robot: &Robot, settings: &MakeSettings) -> Result<Vec<Probl
                 .checked_mul(10_000)
                 .and_then(|s| s.checked_add(c as u64 * 100 + i as u64))
                 .ok_or_else(|| Error::invalid("seed", "too large"))?;
-            let problem = make_one(robot, &basis, category, i, seed)?;
-            out.push(problem);
+            jobs.push((*category, i, seed));
         }
     }
-    Ok(out)
+    let bar = super::runner::progress_bar(jobs.len(), settings.progress, "problems generated");
+    let out = jobs
+        .par_iter()
+        .map(|&(category, i, seed)| {
+            // A seed whose draws all fail the checks gives way to a spare one.
+            let p = make_one(generator, category, i, seed)
+                .or_else(|_| make_one(generator, category, i, seed + SPARE_SEED_OFFSET));
+            bar.inc(1);
+            p
+        })
+        .collect::<Result<Vec<_>>>();
+    bar.finish_and_clear();
+    out
+}
+
+/// The synthetic generator the suite is drawn from (see
+/// [`super::synth_target::bench_generator`]).
+pub fn generator(robot: &Robot) -> Result<Generator> {
+    bench_generator(robot)
 }
 
 /// One problem of `category` (index `i` within it), first sub-seed that
 /// passes the generation checks.
-pub fn make_one(
-    robot: &Robot,
-    basis: &Basis,
-    category: &str,
-    i: usize,
-    seed: u64,
-) -> Result<ProblemFile> {
+pub fn make_one(generator: &Generator, category: &str, i: usize, seed: u64) -> Result<ProblemFile> {
+    if !CATEGORIES.contains(&category) {
+        return Err(Error::invalid(
+            "category",
+            format!("must be one of {CATEGORIES:?}, got {category:?}"),
+        ));
+    }
+    let mut last = String::from("no synthetic target drawn");
     for attempt in 0..ATTEMPTS {
         let mut rng = ChaCha8Rng::seed_from_u64(seed.wrapping_mul(7919).wrapping_add(attempt));
-        if let Some(p) = try_make(robot, basis, category, i, seed, &mut rng)? {
-            return Ok(p);
+        let Some(target) = draw_target(generator, &mut rng)? else {
+            continue;
+        };
+        for _ in 0..PLACEMENTS_PER_DRAW {
+            match try_make(generator, &target, category, i, seed, &mut rng)? {
+                Ok(p) => return Ok(p),
+                Err(reason) => last = reason,
+            }
         }
     }
     Err(Error::Numerical(format!(
-        "{category} problem {i} (seed {seed}): no draw passed the checks in {ATTEMPTS} attempts"
+        "{category} problem {i} (seed {seed}): no draw passed the checks in {ATTEMPTS} attempts; last: {last}"
     )))
 }
 
 /// The prior mean's geometry a category places obstacles against.
 struct MeanPath {
     start: Vec<f64>,
-    goal: Vector3<f64>,
+    end: Vec<f64>,
     tcp: Vec<Vector3<f64>>,
-    q: DMatrix<f64>,
+}
+
+/// A request under construction with its witness candidates.
+struct Draft {
+    request: Value,
+    candidates: Vec<DVector<f64>>,
+    feasible: bool,
+    note: String,
 }
 
 fn try_make(
-    robot: &Robot,
-    basis: &Basis,
+    generator: &Generator,
+    target: &SynthTarget,
     category: &str,
     i: usize,
     seed: u64,
     rng: &mut ChaCha8Rng,
-) -> Result<Option<ProblemFile>> {
-    let demo_seed: u64 = rng.gen();
-    let (dist, prior_note) = prior_for(basis, category, i, demo_seed, rng)?;
+) -> Result<std::result::Result<ProblemFile, String>> {
+    let robot = generator.robot();
+    let basis = generator.basis();
+    let (dist, demos, prior_note) = prior_for(target, category, i, rng);
     let path = mean_path(robot, basis, &dist);
-    let mut duration = 4.0;
-    let (obstacles, feasible, note) = match category {
-        "easy" => (
-            far_cluster(robot, &path, rng, 6)?,
-            true,
-            "cluster far from the arm",
-        ),
-        "on-path" => (on_path(&path, rng), true, "berry on the mean TCP path"),
-        "dense" => (
-            dense_cluster(&path, rng),
-            true,
-            "12 berries around the goal",
-        ),
-        "velocity" => {
-            duration = rng.gen_range(0.5..0.7);
-            (far_cluster(robot, &path, rng, 3)?, true, "short duration")
+    let mut obstacles = target.obstacles.clone();
+    let mut note = String::from("synthetic plant");
+    let feasible = category != "infeasible";
+    match category {
+        "on-path" => {
+            let Some(berry) = on_path(robot, &path, rng)? else {
+                return Ok(Err(
+                    "no phase of the mean path leaves start and goal clear".into()
+                ));
+            };
+            obstacles.extend(berry);
+            note.push_str(" + a berry on the mean TCP path");
         }
-        "joint-limit" => (
-            far_cluster(robot, &path, rng, 3)?,
-            true,
-            "joint 6 at its upper limit",
-        ),
-        "degenerate-prior" => (near_path(&path, rng, 4), true, "degenerate covariance"),
-        _ => infeasible(robot, &path, i, rng),
-    };
-    let scene = Scene::new(obstacles.clone())?;
-    if feasible && !clear_start_and_goal(robot, &scene, &path) {
-        return Ok(None);
+        "dense" => {
+            obstacles.extend(dense_cluster(&target.final_tcp, rng));
+            note.push_str(" + 6 berries 7-14 cm around the goal");
+        }
+        "infeasible" => {
+            let (o, n) = infeasible(robot, &path, &target.final_tcp, i, rng);
+            obstacles.push(o);
+            note = format!("synthetic plant + {n}");
+        }
+        _ => {}
     }
-    let mut request = json!({
+    let request = round_value(&json!({
         "prior": {"mean": dist.mean.as_slice(), "cov": rows(&dist.cov)},
         "promp": basis.config(),
-        "duration_s": duration,
+        "duration_s": generator.settings().demos.duration_s,
         "start": path.start,
-        "goal": {"position": [path.goal.x, path.goal.y, path.goal.z], "tolerance_m": GOAL_TOLERANCE_M},
+        "goal": {"position": [target.final_tcp.x, target.final_tcp.y, target.final_tcp.z],
+                 "tolerance_m": GOAL_TOLERANCE_M},
         "obstacles": obstacles,
         "clearance_m": CLEARANCE_M,
-    });
-    if category == "joint-limit" {
-        request["joint_limit_margin_rad"] = json!(0.0);
-    }
-    Ok(Some(ProblemFile {
-        name: format!("{category}-{i:02}"),
+    }));
+    let start: Vec<f64> = serde_json::from_value(request["start"].clone())
+        .map_err(|e| Error::Numerical(format!("start: {e}")))?;
+    let mut candidates = vec![pin_start(basis, &dist.mean, &start)];
+    candidates.extend(demos.iter().map(|w| pin_start(basis, w, &start)));
+    candidates.extend(
+        detours(basis, &dist)?
+            .iter()
+            .map(|w| pin_start(basis, w, &start)),
+    );
+    let mut draft = Draft {
         request,
+        candidates,
+        feasible,
+        note,
+    };
+    let checked = match category {
+        "velocity" => bind_velocity(&mut draft, robot, rng)?,
+        "joint-limit" => bind_joint6(&mut draft, robot, basis, rng)?,
+        "on-path" => mean_blocked(&draft, robot)?,
+        _ => true,
+    };
+    if !checked {
+        return Ok(Err(format!("the {category} construction does not bind")));
+    }
+    if !check_claim(&draft, robot, &target.final_tcp)? {
+        return Ok(Err(if feasible {
+            "no candidate verifies feasible".into()
+        } else {
+            "infeasibility not certified".into()
+        }));
+    }
+    Ok(Ok(ProblemFile {
+        name: format!("{category}-{i:02}"),
+        request: draft.request,
         expect: Expect {
             feasible,
             min_clearance_m: feasible.then_some(CLEARANCE_M),
@@ -180,81 +263,86 @@ fn try_make(
             generator: GENERATOR.to_string(),
             seed,
             category: category.to_string(),
-            description: format!("{note}; {prior_note}"),
+            description: format!("{}; target {}; {prior_note}", draft.note, target.berry_id),
+            reference_final_tcp: None,
         },
     }))
 }
 
+/// The prior, the demonstrations it was fitted to, and a note.
 fn prior_for(
-    basis: &Basis,
+    target: &SynthTarget,
     category: &str,
     i: usize,
-    demo_seed: u64,
     rng: &mut ChaCha8Rng,
-) -> Result<(WeightDistribution, String)> {
-    match category {
-        "joint-limit" => {
-            let mut final_q = TYPICAL_FINAL;
-            final_q[5] = rng.gen_range(3.70..3.80);
-            let dist = fitted(basis, &final_q, DEMOS, demo_seed)?;
-            Ok((
+) -> (WeightDistribution, Vec<DVector<f64>>, String) {
+    let demos = target.demo_weights.clone();
+    let n = demos.len();
+    if category == "degenerate-prior" && i % 2 == 0 {
+        let few = demos[..3.min(n)].to_vec();
+        let d = &target.distribution;
+        if let Ok(dist) = WeightDistribution::from_demonstrations(&few, d.n_joints, d.n_basis) {
+            return (
                 dist,
-                format!("demonstrations end at joint 6 = {:.3} rad", final_q[5]),
-            ))
+                few,
+                "prior of 3 demonstrations: rank-2 covariance".into(),
+            );
         }
-        "degenerate-prior" if i % 2 == 0 => {
-            let dist = fitted(basis, &TYPICAL_FINAL, 3, demo_seed)?;
-            Ok((dist, "3 demonstrations: rank-2 covariance".to_string()))
-        }
-        "degenerate-prior" => {
-            let mut dist = example_distribution(basis, DEMOS, demo_seed)?;
-            let (a, b) = (rng.gen_range(0..dist.dim()), rng.gen_range(0..dist.dim()));
-            let b = if a == b { (b + 1) % dist.dim() } else { b };
-            let bump = 2.0 * (dist.cov[(a, a)] * dist.cov[(b, b)]).sqrt();
-            dist.cov[(a, b)] += bump;
-            dist.cov[(b, a)] += bump;
-            Ok((
-                dist,
-                format!("indefinite: cov[{a}][{b}] raised beyond Cauchy-Schwarz"),
-            ))
-        }
-        _ => Ok((
-            example_distribution(basis, DEMOS, demo_seed)?,
-            format!("{DEMOS} demonstrations"),
-        )),
     }
-}
-
-fn fitted(basis: &Basis, final_q: &[f64; 7], n: usize, seed: u64) -> Result<WeightDistribution> {
-    let demos = demonstrations(final_q, n, basis.n_samples(), seed);
-    let weights: Vec<DVector<f64>> = demos
-        .iter()
-        .map(|d| fit_weights(basis, d))
-        .collect::<Result<_>>()?;
-    WeightDistribution::from_demonstrations(&weights, 7, basis.n_basis())
+    let mut dist = target.distribution.clone();
+    if category == "degenerate-prior" {
+        let (a, b) = (rng.gen_range(0..dist.dim()), rng.gen_range(0..dist.dim()));
+        let b = if a == b { (b + 1) % dist.dim() } else { b };
+        let bump = 2.0 * (dist.cov[(a, a)] * dist.cov[(b, b)]).sqrt();
+        dist.cov[(a, b)] += bump;
+        dist.cov[(b, a)] += bump;
+        return (
+            dist,
+            demos,
+            format!("indefinite: cov[{a}][{b}] raised beyond Cauchy-Schwarz"),
+        );
+    }
+    (dist, demos, format!("prior of {n} demonstrations"))
 }
 
 fn mean_path(robot: &Robot, basis: &Basis, dist: &WeightDistribution) -> MeanPath {
     let q = dist.trajectory_mean(basis);
-    let tcp: Vec<Vector3<f64>> = (0..q.nrows())
-        .map(|t| robot.tcp_pose(&row(&q, t)).translation.vector)
-        .collect();
     MeanPath {
-        start: row(&q, 0),
-        goal: tcp[tcp.len() - 1],
-        tcp,
-        q,
+        start: q.row(0).iter().copied().collect(),
+        end: q.row(q.nrows() - 1).iter().copied().collect(),
+        tcp: tcp_path(robot, &q),
     }
-}
-
-fn row(q: &DMatrix<f64>, t: usize) -> Vec<f64> {
-    q.row(t).iter().copied().collect()
 }
 
 fn rows(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
     (0..m.nrows())
         .map(|r| m.row(r).iter().copied().collect())
         .collect()
+}
+
+/// `x` rounded to [`SIGNIFICANT_DIGITS`] significant digits.
+pub fn round_significant(x: f64) -> f64 {
+    if !x.is_finite() || x == 0.0 {
+        return x;
+    }
+    format!("{x:.*e}", SIGNIFICANT_DIGITS - 1)
+        .parse()
+        .unwrap_or(x)
+}
+
+/// Every float in `v` rounded with [`round_significant`] (integers kept).
+pub fn round_value(v: &Value) -> Value {
+    match v {
+        Value::Number(n) if n.is_f64() => n
+            .as_f64()
+            .and_then(|x| serde_json::Number::from_f64(round_significant(x)))
+            .map_or_else(|| v.clone(), Value::Number),
+        Value::Array(a) => Value::Array(a.iter().map(round_value).collect()),
+        Value::Object(m) => {
+            Value::Object(m.iter().map(|(k, x)| (k.clone(), round_value(x))).collect())
+        }
+        _ => v.clone(),
+    }
 }
 
 fn sphere(id: String, c: Vector3<f64>, radius: f64) -> Obstacle {
@@ -267,82 +355,83 @@ fn sphere(id: String, c: Vector3<f64>, radius: f64) -> Obstacle {
     }
 }
 
-fn stem(id: String, a: Vector3<f64>, length: f64) -> Obstacle {
-    Obstacle {
-        id,
-        shape: ObstacleShape::Capsule {
-            a: a.into(),
-            b: (a + Vector3::z() * length).into(),
-            radius: 0.003,
-        },
-    }
-}
-
-/// `n` berries around a centre at least 0.25 m from the arm along the mean.
-fn far_cluster(
-    robot: &Robot,
-    path: &MeanPath,
-    rng: &mut ChaCha8Rng,
-    n: usize,
-) -> Result<Vec<Obstacle>> {
-    let mut dir = random_unit(rng);
-    dir.z = dir.z.abs() * 0.3;
-    let centre = path.goal + dir.normalize() * rng.gen_range(0.25..0.4);
-    let obstacles: Vec<Obstacle> = (0..n)
-        .map(|k| {
-            sphere(
-                format!("berry-{k}"),
-                centre + random_unit(rng) * 0.05,
-                rng.gen_range(0.01..0.02),
-            )
-        })
-        .collect();
-    let scene = Scene::new(obstacles.clone())?;
-    let far = (0..path.q.nrows()).step_by(5).all(|t| {
-        scene
-            .min_clearance(robot, &robot.fk(&row(&path.q, t)))
-            .is_none_or(|c| c.distance > 0.1)
-    });
-    Ok(if far { obstacles } else { Vec::new() })
-}
-
-/// A berry with a stem on the mean TCP path, plus 3 neighbours.
-fn on_path(path: &MeanPath, rng: &mut ChaCha8Rng) -> Vec<Obstacle> {
+/// A small berry with a stem at the mean TCP path (its centre within one
+/// radius + 3 cm of it, so that the mean's hand passes it closer than the
+/// clearance), at a random phase in 20-80 % of the motion where both the
+/// start and the final configuration of the mean stay clear of it (the
+/// short synthetic reaches put the arm's final pose over the end of the
+/// TCP path, and a berry there would make the goal itself unreachable).
+/// `None` when no phase qualifies. The generation check then asks that it
+/// blocks the mean and that a witness passes beside it.
+fn on_path(robot: &Robot, path: &MeanPath, rng: &mut ChaCha8Rng) -> Result<Option<Vec<Obstacle>>> {
     let n = path.tcp.len();
-    let k = rng.gen_range(n * 45 / 100..n * 75 / 100);
-    let radius = rng.gen_range(0.015..0.025);
-    let centre = path.tcp[k];
-    let mut obstacles = vec![
-        sphere("berry-0".into(), centre, radius),
-        stem("stem-0".into(), centre + Vector3::z() * radius, 0.05),
-    ];
-    obstacles.extend(near_path(path, rng, 3).into_iter().map(|mut o| {
-        o.id = format!("n{}", o.id);
-        o
-    }));
-    obstacles
+    let mut phases: Vec<usize> = (n * 20 / 100..n * 80 / 100).collect();
+    phases.shuffle(rng);
+    let radius = rng.gen_range(0.006..0.012);
+    for k in phases {
+        let centre = path.tcp[k] + random_unit(rng) * rng.gen_range(0.0..radius + 0.03);
+        let berry = on_path_berry(centre, radius);
+        let scene = Scene::new(berry.clone())?;
+        let clear = |q: &[f64]| {
+            scene
+                .min_clearance(robot, &robot.fk(q))
+                .is_none_or(|c| c.distance >= CLEARANCE_M + 0.005)
+        };
+        if clear(&path.start) && clear(&path.end) {
+            return Ok(Some(berry));
+        }
+    }
+    Ok(None)
 }
 
-/// `n` berries 4-10 cm from random points of the mean TCP path's second half.
-fn near_path(path: &MeanPath, rng: &mut ChaCha8Rng, n: usize) -> Vec<Obstacle> {
-    let len = path.tcp.len();
-    (0..n)
-        .map(|k| {
-            let t = rng.gen_range(len / 2..len);
-            let c = path.tcp[t] + random_unit(rng) * rng.gen_range(0.04..0.10);
-            sphere(format!("berry-{k}"), c, rng.gen_range(0.01..0.02))
-        })
-        .collect()
+/// The on-path berry: a sphere and a 2 cm stem above it.
+fn on_path_berry(centre: Vector3<f64>, radius: f64) -> Vec<Obstacle> {
+    let top = centre + Vector3::z() * (radius + 0.02);
+    vec![
+        sphere("bench-berry-on-path".into(), centre, radius),
+        Obstacle {
+            id: "bench-stem-on-path".into(),
+            shape: ObstacleShape::Capsule {
+                a: (centre + Vector3::z() * radius).into(),
+                b: top.into(),
+                radius: 0.002,
+            },
+        },
+    ]
 }
 
-/// 12 stemmed berries 8-13 cm around the goal.
-fn dense_cluster(path: &MeanPath, rng: &mut ChaCha8Rng) -> Vec<Obstacle> {
-    (0..12)
+/// Joints a detour moves (base yaw, shoulder, elbow).
+const DETOUR_JOINTS: [usize; 3] = [0, 1, 3];
+/// Detour amplitudes at mid-motion (rad).
+const DETOUR_AMPLITUDES: [f64; 4] = [-0.2, -0.1, 0.1, 0.2];
+
+/// Witness candidates that leave the mean: the mean trajectory plus
+/// `a * 64 t³(1-t)³` on one joint (zero position, velocity and acceleration
+/// at both ends, `a` at mid-motion), fitted back into the basis.
+fn detours(basis: &Basis, dist: &WeightDistribution) -> Result<Vec<DVector<f64>>> {
+    let mean = dist.trajectory_mean(basis);
+    let phases = basis.phases();
+    let mut out = Vec::new();
+    for &j in &DETOUR_JOINTS {
+        for &a in &DETOUR_AMPLITUDES {
+            let mut q = mean.clone();
+            for (t, z) in phases.iter().enumerate() {
+                q[(t, j)] += a * via_bump(*z);
+            }
+            out.push(fit_weights(basis, &q)?);
+        }
+    }
+    Ok(out)
+}
+
+/// 6 stemmed berries 7-14 cm around the goal.
+fn dense_cluster(goal: &Vector3<f64>, rng: &mut ChaCha8Rng) -> Vec<Obstacle> {
+    (0..6)
         .map(|k| {
-            let c = path.goal + random_unit(rng) * rng.gen_range(0.08..0.13);
+            let c = goal + random_unit(rng) * rng.gen_range(0.07..0.14);
             let radius = rng.gen_range(0.01..0.018);
             Obstacle {
-                id: format!("berry-{k}"),
+                id: format!("bench-berry-{k}"),
                 shape: ObstacleShape::Berry {
                     center: c.into(),
                     radius,
@@ -359,35 +448,111 @@ fn dense_cluster(path: &MeanPath, rng: &mut ChaCha8Rng) -> Vec<Obstacle> {
 fn infeasible(
     robot: &Robot,
     path: &MeanPath,
+    goal: &Vector3<f64>,
     i: usize,
     rng: &mut ChaCha8Rng,
-) -> (Vec<Obstacle>, bool, &'static str) {
-    let radius = rng.gen_range(0.025..0.04);
+) -> (Obstacle, &'static str) {
+    let radius = rng.gen_range(0.03..0.045);
     if i % 2 == 0 {
         let tcp = robot.tcp_pose(&path.start).translation.vector;
         (
-            vec![sphere("berry-on-start".into(), tcp, radius)],
-            false,
-            "start in collision",
+            sphere("bench-berry-on-start".into(), tcp, radius),
+            "a sphere around the start TCP (start in collision)",
         )
     } else {
         (
-            vec![sphere("berry-on-goal".into(), path.goal, radius)],
-            false,
-            "goal inside an obstacle",
+            sphere("bench-berry-on-goal".into(), *goal, radius),
+            "a sphere around the goal (goal inside an obstacle)",
         )
     }
 }
 
-fn clear_start_and_goal(robot: &Robot, scene: &Scene, path: &MeanPath) -> bool {
-    if scene.is_empty() {
-        return false;
+/// The on-path berry must actually block the prior mean.
+fn mean_blocked(draft: &Draft, robot: &Robot) -> Result<bool> {
+    let problem = validated(&draft.request, robot)?;
+    let mean = problem.evaluate(draft.candidates[0].as_slice());
+    Ok(mean.min_clearance_m.is_some_and(|d| d < CLEARANCE_M))
+}
+
+/// Shorten the duration until the velocity limits bind for the slowest
+/// candidate that is otherwise feasible.
+fn bind_velocity(draft: &mut Draft, robot: &Robot, rng: &mut ChaCha8Rng) -> Result<bool> {
+    let problem = validated(&draft.request, robot)?;
+    let duration = problem.duration();
+    let slowest = reports(&problem, &draft.candidates)
+        .into_iter()
+        .filter(|r| problem.is_feasible(r))
+        .map(|r| r.max_velocity_ratio)
+        .fold(f64::INFINITY, f64::min);
+    if !slowest.is_finite() || slowest <= 0.0 {
+        return Ok(false);
     }
-    let start_clear = scene
-        .min_clearance(robot, &robot.fk(&path.start))
-        .is_none_or(|c| c.distance >= CLEARANCE_M + 0.03);
-    let goal = Point3::from(path.goal);
-    start_clear && scene.obstacle_containing(&goal, 0.05).is_none()
+    let short = round_significant(duration * slowest * rng.gen_range(1.02..1.10));
+    draft.request["duration_s"] = json!(short);
+    draft.note = format!("synthetic plant, duration {short:.3} s: velocity limits bind");
+    Ok(true)
+}
+
+/// Put joint 6's effective upper limit just above the lowest peak of joint
+/// 6 among the otherwise feasible candidates.
+fn bind_joint6(
+    draft: &mut Draft,
+    robot: &Robot,
+    basis: &Basis,
+    rng: &mut ChaCha8Rng,
+) -> Result<bool> {
+    let problem = validated(&draft.request, robot)?;
+    let nb = basis.n_basis();
+    let lowest_peak = reports(&problem, &draft.candidates)
+        .iter()
+        .zip(&draft.candidates)
+        .filter(|(r, _)| problem.is_feasible(r))
+        .map(|(_, w)| {
+            let q6 = basis.matrix() * w.rows(JOINT6 * nb, nb);
+            q6.max()
+        })
+        .fold(f64::INFINITY, f64::min);
+    let upper = robot.limits()[JOINT6].upper;
+    let margin = round_significant(upper - lowest_peak - rng.gen_range(0.001..0.01));
+    if !lowest_peak.is_finite() || margin < 0.0 {
+        return Ok(false);
+    }
+    draft.request["joint_limit_margin_rad"] = json!(margin);
+    draft.note = format!(
+        "synthetic plant, joint-limit margin {margin:.3} rad: joint 6 capped at {:.3} rad",
+        upper - margin
+    );
+    Ok(true)
+}
+
+/// Verify the feasibility claim of the request as written.
+fn check_claim(draft: &Draft, robot: &Robot, goal: &Vector3<f64>) -> Result<bool> {
+    let problem = validated(&draft.request, robot)?;
+    if draft.feasible {
+        return Ok(find_witness(&problem, &draft.candidates).is_some());
+    }
+    let start: Vec<f64> = serde_json::from_value(draft.request["start"].clone())
+        .map_err(|e| Error::Numerical(format!("start: {e}")))?;
+    Ok(start_in_collision(problem.scene(), robot, &start)
+        || goal_ball_inside(problem.scene(), goal))
+}
+
+/// The start configuration penetrates an obstacle.
+fn start_in_collision(scene: &Scene, robot: &Robot, start: &[f64]) -> bool {
+    scene
+        .min_clearance(robot, &robot.fk(start))
+        .is_some_and(|c| c.distance < 0.0)
+}
+
+/// A sphere obstacle contains the whole goal-tolerance ball with 1 cm to
+/// spare, so every TCP position the goal allows lies 1 cm deep inside it.
+fn goal_ball_inside(scene: &Scene, goal: &Vector3<f64>) -> bool {
+    scene.obstacles().iter().any(|o| match &o.shape {
+        ObstacleShape::Sphere { center, radius } => {
+            (Vector3::from(*center) - goal).norm() + GOAL_TOLERANCE_M + 0.01 <= *radius
+        }
+        _ => false,
+    })
 }
 
 #[cfg(test)]
@@ -395,22 +560,14 @@ mod tests {
     use super::*;
 
     #[test]
-    fn generation_is_deterministic_and_checks_hold() {
-        let robot = Robot::panda().unwrap();
-        let basis = Basis::new(&PrompConfig::default()).unwrap();
-        let a = make_one(&robot, &basis, "on-path", 0, 42).unwrap();
-        let b = make_one(&robot, &basis, "on-path", 0, 42).unwrap();
-        assert_eq!(a.to_json().unwrap(), b.to_json().unwrap());
-        assert!(a.expect.feasible);
-        let inf = make_one(&robot, &basis, "infeasible", 1, 43).unwrap();
-        assert!(!inf.expect.feasible);
-        let goal: Vec<f64> =
-            serde_json::from_value(inf.request["goal"]["position"].clone()).unwrap();
-        let obstacles: Vec<Obstacle> =
-            serde_json::from_value(inf.request["obstacles"].clone()).unwrap();
-        let scene = Scene::new(obstacles).unwrap();
-        assert!(scene
-            .obstacle_containing(&Point3::new(goal[0], goal[1], goal[2]), 0.0)
-            .is_some());
+    fn rounding_keeps_ten_significant_digits() {
+        for x in [1.0 / 3.0, -2.718281828459045e-7, 12345.678901234] {
+            let r = round_significant(x);
+            assert!(((r - x) / x).abs() < 1e-9, "{x} -> {r}");
+        }
+        assert_eq!(round_significant(0.0), 0.0);
+        let v = round_value(&json!({"a": [0.1234567890123, 3], "b": 2}));
+        assert_eq!(v["a"][1], 3);
+        assert_eq!(v["a"][0].as_f64().unwrap(), 0.123456789);
     }
 }

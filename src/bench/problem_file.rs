@@ -38,6 +38,10 @@ pub struct Meta {
     /// Free-text description of the construction.
     #[serde(default)]
     pub description: String,
+    /// Reference final TCP position (m), e.g. the demonstrations' mean:
+    /// the runner reports each method's final-point TCP error against it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reference_final_tcp: Option<[f64; 3]>,
 }
 
 /// The problem categories, in report order.
@@ -104,7 +108,7 @@ impl ProblemFile {
         ProblemFile::from_json(name, &text).map_err(|e| Error::file(path, e.to_string()))
     }
 
-    /// The file's JSON: request keys, then `expect` and `meta`.
+    /// The file's compact JSON (one line): request keys, then `expect` and `meta`.
     pub fn to_json(&self) -> Result<String> {
         let mut map = match &self.request {
             Value::Object(m) => m.clone(),
@@ -112,7 +116,7 @@ impl ProblemFile {
         };
         map.insert("expect".into(), to_value(&self.expect)?);
         map.insert("meta".into(), to_value(&self.meta)?);
-        serde_json::to_string_pretty(&Value::Object(map))
+        serde_json::to_string(&Value::Object(map))
             .map_err(|e| Error::Numerical(format!("cannot serialise problem: {e}")))
     }
 

@@ -2,6 +2,7 @@
 //! summaries, written as `report.json` (everything, including every record)
 //! and `report.md` (the tables BENCHMARKS.md quotes).
 
+use super::model_suite::MODEL_CATEGORY;
 use super::problem_file::{write_atomic, CATEGORIES};
 use super::runner::RunRecord;
 use crate::{Error, Result};
@@ -66,6 +67,10 @@ pub struct MethodSummary {
     pub worst_clearance_m: Option<f64>,
     /// Wall-clock time per problem (ms).
     pub time_ms: Percentiles,
+    /// Final-point TCP error against the problems' reference (model mode),
+    /// over every returned trajectory, feasible or not (m); `None` when no
+    /// problem has a reference.
+    pub final_tcp_error_m: Option<Percentiles>,
 }
 
 /// Paired Mahalanobis comparison with `dpmp-qp` on problems both solved.
@@ -112,7 +117,11 @@ impl Report {
             .map(|m| summarise(m, "all", records.iter().filter(|r| &r.method == m)))
             .collect();
         let mut by_category = Vec::new();
-        for c in CATEGORIES.iter().copied().chain(["unknown"]) {
+        for c in CATEGORIES
+            .iter()
+            .copied()
+            .chain([MODEL_CATEGORY, "unknown"])
+        {
             for m in methods {
                 let rows: Vec<&RunRecord> = records
                     .iter()
@@ -154,6 +163,9 @@ impl Report {
         table(&mut s, &self.summary, false);
         let _ = writeln!(s, "\n## By category\n");
         table(&mut s, &self.by_category, true);
+        if self.summary.iter().any(|r| r.final_tcp_error_m.is_some()) {
+            final_tcp_table(&mut s, &self.summary);
+        }
         if !self.paired_cost.is_empty() {
             let _ = writeln!(
                 s,
@@ -227,6 +239,27 @@ fn table(s: &mut String, rows: &[MethodSummary], with_category: bool) {
     }
 }
 
+fn final_tcp_table(s: &mut String, rows: &[MethodSummary]) {
+    let _ = writeln!(
+        s,
+        "\n## Final TCP error vs the demonstrations' mean final TCP (mm)\n"
+    );
+    let _ = writeln!(s, "| method | p50 | p95 | max |");
+    let _ = writeln!(s, "|---|---|---|---|");
+    for r in rows {
+        if let Some(p) = r.final_tcp_error_m {
+            let _ = writeln!(
+                s,
+                "| {} | {:.1} | {:.1} | {:.1} |",
+                r.method,
+                p.p50 * 1e3,
+                p.p95 * 1e3,
+                p.max * 1e3
+            );
+        }
+    }
+}
+
 fn opt(v: Option<f64>, digits: usize) -> String {
     v.map_or_else(|| "-".to_string(), |x| format!("{x:.digits$}"))
 }
@@ -289,6 +322,10 @@ pub fn summarise<'a>(
                 .map(|r| r.time_ms)
                 .collect::<Vec<_>>(),
         ),
+        final_tcp_error_m: {
+            let e: Vec<f64> = rows.iter().filter_map(|r| r.final_tcp_error_m).collect();
+            (!e.is_empty()).then(|| Percentiles::of(&e))
+        },
     }
 }
 

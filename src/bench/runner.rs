@@ -5,7 +5,7 @@
 
 use super::methods::{Case, Method, Outcome};
 use super::problem_file::ProblemFile;
-use crate::optim::{OptimizeRequest, FEASIBILITY_TOLERANCE};
+use crate::optim::{OptimizeRequest, Problem, FEASIBILITY_TOLERANCE};
 use crate::robot::Robot;
 use crate::{Error, Result};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -55,6 +55,9 @@ pub struct RunRecord {
     pub velocity_excess: f64,
     /// TCP distance to the goal at the end (m).
     pub goal_error_m: Option<f64>,
+    /// TCP distance at the end to the problem's `meta.reference_final_tcp`
+    /// (model mode: the demonstrations' mean final TCP), when it has one (m).
+    pub final_tcp_error_m: Option<f64>,
     /// `max(0, goal error - tolerance)` (m).
     pub goal_excess_m: f64,
     /// Wall-clock time of the method (ms).
@@ -86,7 +89,7 @@ pub fn run_benchmark(
     let pairs: Vec<(usize, usize)> = (0..problems.len())
         .flat_map(|p| (0..methods.len()).map(move |m| (p, m)))
         .collect();
-    let bar = progress_bar(pairs.len(), settings.progress);
+    let bar = progress_bar(pairs.len(), settings.progress, "problem x method");
     let mut builder = rayon::ThreadPoolBuilder::new();
     if let Some(k) = settings.workers {
         builder = builder.num_threads(k);
@@ -109,14 +112,14 @@ pub fn run_benchmark(
     Ok(records)
 }
 
-fn progress_bar(len: usize, visible: bool) -> ProgressBar {
+/// A progress bar over `len` items named `what` (hidden unless `visible`).
+pub fn progress_bar(len: usize, visible: bool, what: &str) -> ProgressBar {
     if !visible {
         return ProgressBar::hidden();
     }
     let bar = ProgressBar::new(len as u64);
-    if let Ok(style) =
-        ProgressStyle::with_template("{bar:40} {pos}/{len} problem x method  [{elapsed} < {eta}]")
-    {
+    let template = format!("{{bar:40}} {{pos}}/{{len}} {what}  [{{elapsed}} < {{eta}}]");
+    if let Ok(style) = ProgressStyle::with_template(&template) {
         bar.set_style(style);
     }
     bar
@@ -150,10 +153,15 @@ pub fn run_pair(
         let outcome = method.run(&case)?;
         let ms = start.elapsed().as_secs_f64() * 1e3;
         let mahalanobis = validated.mahalanobis(&outcome.weights);
+        let final_tcp_error_m = p
+            .meta
+            .reference_final_tcp
+            .map(|r| final_tcp_error(&validated, robot, &outcome.weights, &r));
         Ok(Timed {
             outcome,
             ms,
             mahalanobis,
+            final_tcp_error_m,
             request,
         })
     }));
@@ -185,6 +193,7 @@ fn empty_record(name: &str, category: &str, method: &str, expect: bool) -> RunRe
         limit_violation_rad: 0.0,
         velocity_excess: 0.0,
         goal_error_m: None,
+        final_tcp_error_m: None,
         goal_excess_m: 0.0,
         time_ms: 0.0,
         iterations: 0,
@@ -197,7 +206,25 @@ struct Timed {
     outcome: Outcome,
     ms: f64,
     mahalanobis: f64,
+    final_tcp_error_m: Option<f64>,
     request: OptimizeRequest,
+}
+
+/// Distance of the TCP at the end of `weights`' trajectory to `reference`.
+pub fn final_tcp_error(
+    problem: &Problem,
+    robot: &Robot,
+    weights: &[f64],
+    reference: &[f64; 3],
+) -> f64 {
+    let psi = problem.basis().row_at(1.0);
+    let nb = psi.len();
+    let q_end: Vec<f64> = weights
+        .chunks(nb)
+        .map(|w| w.iter().zip(psi.iter()).map(|(a, b)| a * b).sum())
+        .collect();
+    let tcp = robot.tcp_pose(&q_end).translation.vector;
+    (tcp - nalgebra::Vector3::from(*reference)).norm()
 }
 
 fn fill(r: &mut RunRecord, min_expected: Option<f64>, t: &Timed) {
@@ -213,6 +240,7 @@ fn fill(r: &mut RunRecord, min_expected: Option<f64>, t: &Timed) {
     r.limit_violation_rad = rep.max_joint_limit_violation_rad.max(0.0);
     r.velocity_excess = (rep.max_velocity_ratio - 1.0).max(0.0);
     r.goal_error_m = rep.goal_error_m;
+    r.final_tcp_error_m = t.final_tcp_error_m;
     r.goal_excess_m = match (&req.goal, rep.goal_error_m) {
         (Some(g), Some(e)) => (e - g.tolerance_m).max(0.0),
         _ => 0.0,

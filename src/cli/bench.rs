@@ -1,6 +1,8 @@
 //! `dpmp bench`: run the offline benchmark suite, or generate it.
 //!
 //! - `dpmp bench --problems problems/ --out DIR [--methods a,b] [--workers K] [--limit N]`
+//! - `dpmp bench --model DIR --data DIR [--split test] --out DIR [...]`: the
+//!   plan pipeline on a generated dataset (network prior, then each method)
 //! - `dpmp bench make-problems --out problems/ [--seed S] [--per-category N]`
 
 use crate::bench::{self, method_from_name, MakeSettings, RunSettings, DEFAULT_METHODS};
@@ -28,9 +30,20 @@ pub struct BenchArgs {
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub workers: Option<usize>,
-    /// Run only the first N problems (sorted by file name).
+    /// Run only the first N problems (sorted by file name) or targets.
     #[arg(long)]
     pub limit: Option<usize>,
+    /// Model mode: trained model folder (config.json + model.safetensors);
+    /// needs --data. Runs the plan pipeline (network prior, then each
+    /// method) on the dataset's targets instead of --problems.
+    #[arg(long, requires = "data")]
+    pub model: Option<PathBuf>,
+    /// Model mode: generated dataset (`dpmp data generate` output).
+    #[arg(long, requires = "model")]
+    pub data: Option<PathBuf>,
+    /// Model mode: dataset split (train, val, test or all).
+    #[arg(long, default_value = "test")]
+    pub split: String,
 }
 
 /// `dpmp bench` subcommands.
@@ -64,11 +77,13 @@ pub fn run(args: BenchArgs) -> Result<()> {
 
 fn make(args: MakeArgs) -> Result<()> {
     let robot = Robot::panda()?;
+    let generator = bench::make_problems::generator(&robot)?;
     let settings = MakeSettings {
         seed: args.seed,
         per_category: args.per_category,
+        progress: true,
     };
-    let problems = bench::make_problems(&robot, &settings).map_err(super::as_flag_error)?;
+    let problems = bench::make_problems(&generator, &settings).map_err(super::as_flag_error)?;
     std::fs::create_dir_all(&args.out).map_err(|e| Error::file(&args.out, e.to_string()))?;
     for p in &problems {
         p.save(&args.out)?;
@@ -102,14 +117,29 @@ fn run_suite(args: BenchArgs) -> Result<()> {
         workers: args.workers,
         progress: true,
     };
-    let report = bench::run_suite(
-        &args.problems,
-        &args.out,
-        methods,
-        args.limit,
-        &settings,
-        &command,
-    )?;
+    let report = match (&args.model, &args.data) {
+        (Some(model), Some(data)) => bench::run_model_suite(
+            bench::ModelSource {
+                model,
+                data,
+                split: &args.split,
+            },
+            &args.out,
+            methods,
+            args.limit,
+            &settings,
+            &command,
+        )?,
+        (None, None) => bench::run_suite(
+            &args.problems,
+            &args.out,
+            methods,
+            args.limit,
+            &settings,
+            &command,
+        )?,
+        _ => return Err(Error::invalid("--model", "--model and --data go together")),
+    };
     print!("{}", report.markdown());
     eprintln!("report written to {}", args.out.display());
     Ok(())
