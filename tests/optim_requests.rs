@@ -154,19 +154,34 @@ fn infeasible_cases_are_diagnosed_with_the_constraint() {
     let resp = optimize(&r, &robot).unwrap();
     assert_eq!(resp.status, Status::Infeasible);
     assert!(resp.reason.unwrap().contains("out of reach"));
-    // Obstacle covering the goal.
+    // Goal buried in an obstacle (deeper than tolerance + clearance + the
+    // TCP's distance to the fingers): diagnosed up front.
     let mut r = base.clone();
     let goal = r.goal.as_ref().unwrap().position;
     r.obstacles.push(Obstacle {
         id: "over-goal".into(),
         shape: ObstacleShape::Sphere {
             center: goal,
-            radius: 0.02,
+            radius: 0.1,
         },
     });
     let resp = optimize(&r, &robot).unwrap();
     assert_eq!(resp.status, Status::Infeasible);
-    assert!(resp.reason.unwrap().contains("over-goal"));
+    let reason = resp.reason.unwrap();
+    assert!(
+        reason.contains("over-goal") && reason.contains("deep inside"),
+        "{reason}"
+    );
+    // A berry just around the goal point is not a proof of infeasibility
+    // (the TCP is not a collision shape): never `optimal` with a violation.
+    if let ObstacleShape::Sphere { radius, .. } = &mut r.obstacles[0].shape {
+        *radius = 0.02;
+    }
+    let resp = optimize(&r, &robot).unwrap();
+    let problem = r.validate(&robot).unwrap();
+    if resp.status == Status::Optimal {
+        assert!(problem.is_feasible(&problem.evaluate(&resp.weights)));
+    }
 }
 
 #[test]

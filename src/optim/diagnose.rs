@@ -8,7 +8,7 @@ use nalgebra::{Point3, Vector3};
 impl Problem {
     /// Why the problem is infeasible before any solve, if it evidently is:
     /// start (or final configuration) outside the limits, start in
-    /// collision, goal inside an obstacle's clearance, goal beyond the
+    /// collision, goal buried deep in an obstacle, goal beyond the
     /// arm's reach, or inverse kinematics to the goal failing from several
     /// seeds.
     pub fn diagnose(&self) -> Option<String> {
@@ -57,12 +57,8 @@ impl Problem {
     fn goal_problem(&self) -> Option<String> {
         let goal = self.goal.as_ref()?;
         let p = Point3::from(goal.position);
-        if let Some(i) = self.scene.obstacle_containing(&p, self.clearance_m) {
-            return Some(format!(
-                "goal: obstacle '{}' covers the goal position (within clearance_m {:.4})",
-                self.scene.obstacles()[i].id,
-                self.clearance_m
-            ));
+        if let Some(reason) = self.goal_buried(&p, goal.tolerance_m) {
+            return Some(reason);
         }
         let (shoulder, reach) = self.reach_bound();
         let distance = (p.coords - shoulder).norm();
@@ -72,6 +68,42 @@ impl Problem {
             ));
         }
         self.ik_failure(&p, goal.tolerance_m)
+    }
+
+    /// The goal is buried in an obstacle when every TCP position within
+    /// the tolerance lies deeper inside it than the clearance plus the
+    /// distance from the TCP to the nearest robot collision shape (the
+    /// fingers): then that shape is inside too. Signed distances are
+    /// 1-Lipschitz, so depth at the goal ≥ tolerance + clearance + that
+    /// distance proves it.
+    fn goal_buried(&self, p: &Point3<f64>, tolerance: f64) -> Option<String> {
+        let (i, depth) = self.scene.deepest_containing(p)?;
+        let reach = self.tcp_to_robot_shapes().max(0.0);
+        (depth >= tolerance + self.clearance_m + reach).then(|| {
+            format!(
+                "goal: the goal lies {depth:.4} m deep inside obstacle '{}': with tolerance_m {tolerance:.4} the gripper (whose nearest collision shape is {reach:.4} m from the TCP) cannot keep clearance_m {:.4}",
+                self.scene.obstacles()[i].id,
+                self.clearance_m
+            )
+        })
+    }
+
+    /// Signed distance from the TCP to the nearest robot collision shape
+    /// (the same at every configuration: the hand is rigid with the TCP).
+    fn tcp_to_robot_shapes(&self) -> f64 {
+        let home = self.robot.home();
+        let tcp = self.robot.tcp_pose(&home).translation.vector;
+        let point = crate::scene::Obstacle {
+            id: "tcp".into(),
+            shape: crate::scene::ObstacleShape::Sphere {
+                center: tcp.into(),
+                radius: 1e-6,
+            },
+        };
+        crate::scene::Scene::new(vec![point])
+            .ok()
+            .and_then(|s| s.min_clearance(&self.robot, &self.robot.fk(&home)))
+            .map_or(0.0, |c| c.distance)
     }
 
     /// Shoulder position and an upper bound on the TCP's distance from it:

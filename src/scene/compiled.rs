@@ -2,7 +2,7 @@
 //! bounds, plus the point query used to diagnose goals inside obstacles.
 
 use super::broadphase::Bounds;
-use super::distance::point_distance;
+use super::distance::{point_distance, point_signed_distance};
 use super::obstacle::{validate_obstacles, Obstacle, ObstacleShape};
 use super::shape::{compile_obstacle, CompiledObstacle};
 use crate::{Error, Result};
@@ -95,6 +95,24 @@ impl Scene {
             .filter(|(_, d)| *d <= margin)
             .min_by(|a, b| a.1.total_cmp(&b.1))
             .map(|(i, _)| i)
+    }
+
+    /// The obstacle `p` lies deepest inside and that depth (m, > 0), from
+    /// the convex parts (a lower bound on the depth in their union).
+    pub fn deepest_containing(&self, p: &Point3<f64>) -> Option<(usize, f64)> {
+        self.compiled
+            .iter()
+            .enumerate()
+            .filter(|(_, c)| c.bounds.point_gap(&p.coords) <= 0.0)
+            .filter_map(|(i, c)| {
+                let depth = c
+                    .parts
+                    .iter()
+                    .map(|part| -point_signed_distance(part, &p.coords))
+                    .fold(f64::NEG_INFINITY, f64::max);
+                (depth > 0.0).then_some((i, depth))
+            })
+            .max_by(|a, b| a.1.total_cmp(&b.1))
     }
 
     /// Diagonal of the box around every obstacle (0 when empty).

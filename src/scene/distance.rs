@@ -51,3 +51,11 @@ pub fn point_distance(part: &Part, p: &Vector3<f64>) -> f64 {
     part.shape
         .distance_to_point(&pose, super::shape::to_glam(&(p - origin)), true) as f64
 }
+
+/// Signed distance from `p` to the part's surface (negative inside).
+pub fn point_signed_distance(part: &Part, p: &Vector3<f64>) -> f64 {
+    let origin = part.pose.translation.vector;
+    let pose = parry_pose_relative(&part.pose, &origin);
+    part.shape
+        .distance_to_point(&pose, super::shape::to_glam(&(p - origin)), false) as f64
+}
