@@ -78,20 +78,23 @@ echo "== $(nproc) cores, profile $PROFILE, $DURATION per point"
 bench_route /v1/optimize "$OUT/optimize.json"
 
 if [ -f models/default/config.json ] && command -v python3 >/dev/null; then
-  python3 - "$OUT/plan.json" <<'PY'
-import base64, json, sys
-# Writing the 640x480 JPEG needs PIL (python3-pil).
-try:
-    from PIL import Image
-    import io, random
-    random.seed(1)
-    img = Image.new("RGB", (640, 480), (40, 120, 40))
-    buf = io.BytesIO(); img.save(buf, format="JPEG", quality=90)
-    data = buf.getvalue()
-except ImportError:
-    sys.exit("python3-pil is needed for the /v1/plan body")
-json.dump({"image_base64": base64.b64encode(data).decode(), "target_box": [300, 200, 340, 250],
-           "mask_applied": False, "clearance_m": 0.02}, open(sys.argv[1], "w"))
+  # A real generated plant (its image as a 640x480 JPEG, its box and scene).
+  python3 -c "import PIL" 2>/dev/null || apt-get install -y python3-pil >/dev/null \
+    || sudo apt-get install -y python3-pil >/dev/null
+  rm -rf "$OUT/plant"
+  "$BIN" data generate --out "$OUT/plant" --configs 1 --berries-per-config 1 --demos 2 --seed 5 >/dev/null
+  python3 - "$OUT/plant" "$OUT/plan.json" <<'PY'
+import base64, io, json, sys
+from PIL import Image
+data_dir, out = sys.argv[1], sys.argv[2]
+manifest = json.load(open(f"{data_dir}/manifest.json"))
+entry = (manifest.get("targets") or manifest.get("entries"))[0]
+record = json.load(open(f"{data_dir}/{entry['record']}"))
+buf = io.BytesIO()
+Image.open(f"{data_dir}/{record['image']}").convert("RGB").save(buf, format="JPEG", quality=90)
+json.dump({"image_base64": base64.b64encode(buf.getvalue()).decode(), "target_box": record["box"],
+           "mask_applied": True, "obstacles": record["scene"]["obstacles"], "clearance_m": 0.02},
+          open(out, "w"))
 PY
   bench_route /v1/plan "$OUT/plan.json"
 else
