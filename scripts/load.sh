@@ -4,6 +4,7 @@
 #   scripts/load.sh                # release build, 10 s per point, 60 s memory run
 #   PROFILE=dev DURATION=5s MEMORY_S=30 scripts/load.sh
 #   SEED=3 scripts/load.sh         # another typical problem (default seed 0)
+#   ROUTES=plan MEMORY_S=0 scripts/load.sh   # /v1/plan only
 #
 # Measures /v1/optimize on the typical problem (real-like prior, 10-obstacle
 # cluster, 150 samples, 2 cm clearance; `dpmp serve --print-typical-request`)
@@ -75,12 +76,11 @@ bench_route() { # route body
 }
 
 echo "== $(nproc) cores, profile $PROFILE, $DURATION per point"
-bench_route /v1/optimize "$OUT/optimize.json"
+[ "${ROUTES:-all}" = plan ] || bench_route /v1/optimize "$OUT/optimize.json"
 
 if [ -f models/default/config.json ] && command -v python3 >/dev/null; then
   # A real generated plant (its image as a 640x480 JPEG, its box and scene).
-  python3 -c "import PIL" 2>/dev/null || apt-get install -y python3-pil >/dev/null \
-    || sudo apt-get install -y python3-pil >/dev/null
+  python3 -c "import PIL" 2>/dev/null || python3 -m pip install --quiet pillow
   rm -rf "$OUT/plant"
   "$BIN" data generate --out "$OUT/plant" --configs 1 --berries-per-config 1 --demos 2 --seed 5 >/dev/null
   python3 - "$OUT/plant" "$OUT/plan.json" <<'PY'
@@ -101,6 +101,9 @@ else
   echo "/v1/plan skipped: no model at models/default (train one first, see README)"
 fi
 
+if [ "$MEMORY_S" -le 0 ]; then
+  exit 0
+fi
 echo "== resident memory over ${MEMORY_S} s at 8 clients (/v1/optimize)"
 cp "$OUT/optimize.json" "$OUT/body.json"
 run_wrk /v1/optimize 8 "${MEMORY_S}s" > "$OUT/wrk-memory.txt" &
