@@ -175,21 +175,9 @@ impl CustomOp1 for Col2Im {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::net::test_support::max_abs_diff;
     use candle_core::{DType, Device, Var};
     use candle_nn::VarMap;
-
-    fn max_abs_diff(a: &Tensor, b: &Tensor) -> f32 {
-        (a - b)
-            .unwrap()
-            .abs()
-            .unwrap()
-            .flatten_all()
-            .unwrap()
-            .max(0)
-            .unwrap()
-            .to_scalar::<f32>()
-            .unwrap()
-    }
 
     fn layer(c: usize, o: usize) -> (VarMap, Conv3x3) {
         let varmap = VarMap::new();

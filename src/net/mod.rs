@@ -24,6 +24,8 @@ pub mod ops;
 pub mod predict;
 pub mod preprocess;
 pub mod resize;
+#[cfg(test)]
+mod test_support;
 
 pub use config::{Arch, ModelConfig, OutputNorm};
 pub use covariance::CovarianceDecoder;

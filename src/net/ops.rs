@@ -157,20 +157,8 @@ impl CustomOp1 for SumPool2x {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::net::test_support::max_abs_diff;
     use candle_core::{Device, Var};
-
-    fn max_abs_diff(a: &Tensor, b: &Tensor) -> f32 {
-        (a - b)
-            .unwrap()
-            .abs()
-            .unwrap()
-            .flatten_all()
-            .unwrap()
-            .max(0)
-            .unwrap()
-            .to_scalar::<f32>()
-            .unwrap()
-    }
 
     /// Values and gradients (of `sum(f(x) * r)`) of ours against candle's.
     fn check(ours: impl Fn(&Tensor) -> Tensor, reference: impl Fn(&Tensor) -> Tensor) {
