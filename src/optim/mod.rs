@@ -11,6 +11,7 @@
 //! - [`qp`] — one QP in Clarabel (CSC built directly).
 //! - [`scp`] — the trust-region SCP driver, [`SolveControl`], [`Solution`].
 //! - [`verify`] — dense verification and the trajectory output.
+//! - [`working_set`] — which candidate rows each QP starts with and gains.
 //! - [`diagnose`] — infeasibility diagnosis before solving.
 //! - [`sampling`] — `samples: N` projected prior draws.
 //! - [`report`] — the response types.
@@ -30,6 +31,7 @@ pub mod sampling;
 pub mod scp;
 pub mod verify;
 pub mod whiten;
+pub mod working_set;
 
 pub use problem::{Problem, FEASIBILITY_TOLERANCE};
 pub use report::{

@@ -5,7 +5,9 @@
 //! towards the prior mean, the whitened draw when projecting a sample).
 //! Rows: equalities (zero cone), hard and soft (slacked) inequalities
 //! `a·z ≤ b (+ s)`, second-order cones `|g0 + G z| ≤ r (+ s)` (the goal),
-//! and an optional trust-region box `|z - z_k|∞ ≤ Δ`. The constraint
+//! and an optional trust-region ball `|z - z_k|₂ ≤ Δ` (a second-order cone:
+//! in whitened coordinates that is a Mahalanobis ball, and it costs one cone
+//! instead of 2 x dim rows). The constraint
 //! matrix is built column by column straight into Clarabel's CSC format.
 
 use crate::Error;
@@ -69,7 +71,7 @@ pub struct Qp {
     pub inequalities: Vec<Inequality>,
     /// Second-order cones.
     pub cones: Vec<Cone>,
-    /// Trust region: centre and half-width of a box on `z`.
+    /// Trust region: centre and radius of a ball on `z`.
     pub trust: Option<(DVector<f64>, f64)>,
 }
 
@@ -92,6 +94,8 @@ pub struct QpSolution {
     pub rows: usize,
     /// Number of variables.
     pub variables: usize,
+    /// Interior-point iterations Clarabel took.
+    pub ipm_iterations: u32,
 }
 
 /// Outcome of a solve that did not produce a solution.
@@ -221,16 +225,6 @@ impl Qp {
             cols.row(&empty, &[(s, -1.0)], 0.0);
             n_nonneg += 1;
         }
-        if let Some((centre, radius)) = &self.trust {
-            for c in 0..n_z {
-                let mut e = DVector::zeros(n_z);
-                e[c] = 1.0;
-                cols.row(&e, &[], centre[c] + radius);
-                e[c] = -1.0;
-                cols.row(&e, &[], radius - centre[c]);
-                n_nonneg += 2;
-            }
-        }
         if n_nonneg > 0 {
             cones.push(SupportedConeT::NonnegativeConeT(n_nonneg));
         }
@@ -242,6 +236,16 @@ impl Qp {
                 cols.row(&row, &[], cone.offset[r]);
             }
             cones.push(SupportedConeT::SecondOrderConeT(1 + cone.offset.len()));
+        }
+        if let Some((centre, radius)) = &self.trust {
+            // b - A x = (radius, z - centre).
+            cols.row(&empty, &[], *radius);
+            for c in 0..n_z {
+                let mut e = DVector::zeros(n_z);
+                e[c] = -1.0;
+                cols.row(&e, &[], -centre[c]);
+            }
+            cones.push(SupportedConeT::SecondOrderConeT(1 + n_z));
         }
         let b = cols.b.clone();
         let m = b.len();
@@ -289,6 +293,7 @@ impl Qp {
             inequality_duals: sol.z[n_eq..n_eq + self.inequalities.len()].to_vec(),
             rows: m,
             variables: n,
+            ipm_iterations: solver.info.iterations,
         })
     }
 }
@@ -335,13 +340,15 @@ mod tests {
     #[test]
     fn equalities_cones_slacks_and_trust_region_behave() {
         let n = 2;
-        // z0 = 1 exactly, z1 free, cost centre (0, 3), trust box around 0 width 2.
+        // z0 = 1 exactly, z1 free, cost centre (0, 3), trust ball of radius
+        // 2 around 0: z1 = sqrt(4 - 1).
         let mut qp = Qp::new(n);
         qp.center = DVector::from_vec(vec![0.0, 3.0]);
         qp.equalities.push((unit(n, 0, 1.0), 1.0));
         qp.trust = Some((DVector::zeros(n), 2.0));
         let sol = qp.solve(&QpSettings::default()).unwrap();
-        assert!((sol.z[0] - 1.0).abs() < 1e-8 && (sol.z[1] - 2.0).abs() < 1e-7);
+        assert!((sol.z[0] - 1.0).abs() < 1e-8, "{}", sol.z);
+        assert!((sol.z[1] - 3f64.sqrt()).abs() < 1e-7, "{}", sol.z);
         // Soft row z1 <= -10 with a small penalty: slack takes the rest.
         let mut qp = Qp::new(n);
         qp.inequalities.push(Inequality {

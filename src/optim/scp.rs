@@ -1,27 +1,40 @@
 //! Sequential convex programming towards a centre in whitened coordinates
 //! (the prior mean for [`Problem::solve`], a draw for [`Problem::project`]).
 //!
-//! Each iteration linearises the clearances (pairs within the activation
-//! distance, at every optimisation phase) and the goal at the current
-//! iterate, solves one QP (hard linear rows, L1-slacked clearance rows and
-//! goal cone, trust-region box) with Clarabel, and accepts the step when the
-//! true merit `|z - c|² + ρ·violation` (real FK and parry distances)
-//! improves by at least 10 % of the model's prediction; otherwise the trust
-//! region shrinks. A converged feasible iterate is verified densely; flagged
-//! phases join the optimisation set and the loop goes on. Slack that the
-//! penalty cannot drive to zero raises the penalty, up to a cap, then the
-//! problem is reported infeasible with the worst constraint.
+//! Each iteration linearises every clearance pair within the activation
+//! distance (at every optimisation phase) and the goal at the current
+//! iterate, and solves one QP with Clarabel: hard limit rows, L1-slacked
+//! clearance rows and goal cone, and a trust-region ball `|z - z_k| ≤ Δ`.
+//! The QP is solved on a small [`working_set`](super::working_set): the
+//! rows active in the previous QP, thinned limit rows a step can reach, and
+//! thinned clearance rows near the target. Limit rows the solution breaks
+//! are always generated until none is left; clearance rows get
+//! [`WORKING_SET_ROUNDS`] round(s), so that an iterate deep in collision
+//! (hundreds of violated rows) still costs a small QP; the model the step
+//! is judged against is then the working set's. A step is accepted when the
+//! true merit `|z - c|² + ρ·violation` (real FK and parry distances, every
+//! pair at every phase) improves by at least 10 % of the model's
+//! prediction; otherwise the trust region shrinks. When the iteration
+//! stalls short of feasibility, generation becomes exact (every violated
+//! clearance row joins the QP), and only a stall on that full model raises
+//! the penalty, up to a cap, after which the problem is reported
+//! infeasible with the worst constraint. A converged feasible iterate is
+//! verified densely; flagged phases join the optimisation set and the loop
+//! goes on.
 
+use super::linear::{RowKind, RowRef};
 use super::phases::PhaseRows;
 use super::problem::{Problem, FEASIBILITY_TOLERANCE};
 use super::qp::{Cone, Inequality, Qp, QpFailure, QpSettings};
 use super::report::{Status, TrajectoryReport};
 use super::verify::Verification;
+use super::working_set::{thin_in_time, Candidate};
 use crate::robot::Frames;
 use crate::scene::Clearance;
 use crate::{Error, Result};
 use nalgebra::{DMatrix, DVector, Vector3};
 use rayon::prelude::*;
+use std::collections::HashSet;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
@@ -30,19 +43,36 @@ use std::time::Instant;
 /// linearisation and sampling errors do not leave the true trajectory just
 /// short of the requirement.
 pub const CLEARANCE_BUFFER_M: f64 = 2e-4;
+/// Goal tolerance the QP aims for: `tolerance_m` less a buffer of
+/// [`CLEARANCE_BUFFER_M`] (at most half the tolerance), for the same reason.
+fn buffered_tolerance(tolerance_m: f64) -> f64 {
+    tolerance_m - CLEARANCE_BUFFER_M.min(0.5 * tolerance_m)
+}
 /// Largest L1 penalty before slack is declared irreducible.
 pub const MAX_PENALTY: f64 = 1e6;
+/// A feasible iterate whose next step is predicted to improve the merit by
+/// less than this fraction of it has converged (the tail of SCP on curved
+/// constraints is linear; this stops it at a relative cost error of about
+/// this size).
+const OPTIMALITY_TOLERANCE: f64 = 1e-3;
 /// Largest trust-region half-width.
 pub const MAX_TRUST_REGION: f64 = 1e3;
 /// Smallest trust-region half-width before the iteration counts as stalled.
 pub const MIN_TRUST_REGION: f64 = 1e-4;
 /// Linear rows count as satisfied within this (rad, rad/s).
 const LINEAR_TOLERANCE: f64 = 1e-7;
-/// Robot shapes linearised per obstacle and phase (the closest ones).
-const SHAPES_PER_OBSTACLE: usize = 2;
-/// Of a run of phases where a pair is short of the clearance target, every
-/// this-many-th phase gets a QP row (besides the local minima).
-const VIOLATION_STRIDE: usize = 3;
+/// Clearance rows within this much of the target (m) start in the working
+/// set of each QP; the rest join by constraint generation.
+const CLEARANCE_BAND_M: f64 = 3e-3;
+/// A candidate row the QP solution breaks by more than this (rad, rad/s or
+/// m) joins the working set.
+const GENERATION_TOLERANCE: f64 = 1e-8;
+/// Generation rounds of clearance rows per QP while the iterate is being
+/// improved; limit rows are always generated to the end. One round (the
+/// working set as it stands) keeps QPs small in the early iterations, when
+/// hundreds of clearance rows are violated; the merit test guards the step,
+/// and a stall switches to exact generation (see [`Problem::solve`]).
+const WORKING_SET_ROUNDS: usize = 1;
 /// Most phases added per dense verification round.
 const MAX_ADDED_PER_ROUND: usize = 64;
 
@@ -80,8 +110,12 @@ impl SolveControl {
 /// Counters of one solve (for benchmarks and the CLI).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct SolveStats {
-    /// QPs solved.
+    /// SCP iterations (QP subproblems).
     pub iterations: usize,
+    /// Clarabel solves (a subproblem takes one per generation round).
+    pub qp_solves: usize,
+    /// Clarabel interior-point iterations over all solves.
+    pub ipm_iterations: usize,
     /// Steps rejected by the merit test.
     pub rejected_steps: usize,
     /// Largest QP: rows of the constraint matrix.
@@ -151,7 +185,10 @@ struct PhasePairs {
 struct GoalEval {
     q: Vec<f64>,
     residual: Vector3<f64>,
+    /// Distance beyond `tolerance_m` (what must reach zero).
     excess: f64,
+    /// Distance beyond the buffered tolerance the QP aims for (the merit's).
+    buffered_excess: f64,
 }
 
 impl GridEval {
@@ -160,7 +197,7 @@ impl GridEval {
     }
 
     fn goal_excess(&self) -> f64 {
-        self.goal.as_ref().map_or(0.0, |g| g.excess)
+        self.goal.as_ref().map_or(0.0, |g| g.buffered_excess)
     }
 
     fn feasible(&self) -> bool {
@@ -193,11 +230,8 @@ impl Problem {
             self.evaluate_grid(&rows, centre.clone(), centre)
         });
         let mut converged = true;
-        // Temporal screening of clearance rows; switched off for good at
-        // the first rejected step, so that a stall (and so a penalty
-        // increase or an `infeasible` verdict) is only declared on the full
-        // set of clearance rows.
-        let mut screen_time = true;
+        let mut hint = ActiveRows::default();
+        let mut exact = false;
         loop {
             if converged && eval.feasible() {
                 let v = timed(&mut stats.verification_ms, || self.verify(&eval.w));
@@ -244,11 +278,22 @@ impl Problem {
                 );
                 return Ok(self.unverified(Status::MaxIterations, &eval, reason, stats, started));
             }
-            let trust = eval.linear_ok.then_some(radius);
-            let (sol, model_here) = match timed(&mut stats.qp_ms, || {
-                self.subproblem(&rows, &eval, centre, rho, trust, screen_time, ctl)
-            }) {
-                Ok(x) => x,
+            let at = Linearisation {
+                exact,
+                rows: &rows,
+                eval: &eval,
+                centre,
+                rho,
+                trust: eval.linear_ok.then_some(radius),
+            };
+            let mut qp_ms = 0.0;
+            let subproblem = timed(&mut qp_ms, || self.subproblem(&at, &hint, ctl, &mut stats));
+            stats.qp_ms += qp_ms;
+            let (sol, model_here) = match subproblem {
+                Ok((sol, model_here, active)) => {
+                    hint = active;
+                    (sol, model_here)
+                }
                 Err(QpFailure::Infeasible) => {
                     let reason = "joint position limits (minus the margin), velocity limits and the start / final configuration cannot all hold".to_string();
                     return Ok(self.unverified(Status::Infeasible, &eval, reason, stats, started));
@@ -269,9 +314,7 @@ impl Problem {
                 }
             };
             stats.iterations += 1;
-            stats.max_qp_rows = stats.max_qp_rows.max(sol.rows);
-            stats.max_qp_variables = stats.max_qp_variables.max(sol.variables);
-            let step = (&sol.z - &eval.z).amax();
+            let step = (&sol.z - &eval.z).norm();
             let trial = timed(&mut stats.evaluation_ms, || {
                 self.evaluate_grid(&rows, sol.z, centre)
             });
@@ -298,7 +341,9 @@ impl Problem {
             if accept {
                 let tiny = step <= 1e-6 * (1.0 + trial.z.amax())
                     || predicted <= 1e-7 * scale
-                    || (trial.feasible() && actual.abs() <= 1e-6 * scale);
+                    || (trial.feasible()
+                        && (actual.abs() <= 1e-6 * scale
+                            || predicted <= OPTIMALITY_TOLERANCE * scale));
                 if eval.linear_ok && actual >= 0.75 * predicted && step >= 0.9 * radius {
                     radius = (radius * 2.0).min(MAX_TRUST_REGION);
                 }
@@ -308,19 +353,19 @@ impl Problem {
                 }
             } else {
                 stats.rejected_steps += 1;
-                if screen_time {
-                    // The screened model missed a clearance row the step
-                    // broke: use every row from now on, same radius.
-                    screen_time = false;
-                } else {
-                    radius = (0.25 * radius).min(0.5 * step);
-                    if radius < MIN_TRUST_REGION {
-                        converged = true;
-                        radius = self.options.trust_region;
-                    }
+                radius = (0.25 * radius).min(0.5 * step);
+                if radius < MIN_TRUST_REGION {
+                    converged = true;
+                    radius = self.options.trust_region;
                 }
             }
-            if converged && !eval.feasible() && eval.linear_ok {
+            if converged && !eval.feasible() && eval.linear_ok && !exact {
+                // A stall on the working-set model proves nothing: go on
+                // with every clearance row generated, so that a penalty
+                // increase (and `infeasible`) rests on the full model.
+                exact = true;
+                converged = false;
+            } else if converged && !eval.feasible() && eval.linear_ok {
                 rho *= 10.0;
                 converged = false;
                 if rho > MAX_PENALTY {
@@ -357,11 +402,9 @@ impl Problem {
                 .filter_map(|p| {
                     let q = rows.position(p, &w);
                     let frames = self.robot.fk(&q);
-                    let list = closest_per_obstacle(
+                    let list =
                         self.scene
-                            .clearances_within(&self.robot, &frames, self.activation_m),
-                        SHAPES_PER_OBSTACLE,
-                    );
+                            .clearances_within(&self.robot, &frames, self.activation_m);
                     (!list.is_empty()).then_some(PhasePairs {
                         phase: p,
                         phase_value: rows.phases()[p],
@@ -383,10 +426,12 @@ impl Problem {
             let p = self.robot.tcp_pose(&q).translation.vector;
             let residual = p - Vector3::from(g.position);
             let excess = (residual.norm() - g.tolerance_m).max(0.0);
+            let buffered_excess = (residual.norm() - buffered_tolerance(g.tolerance_m)).max(0.0);
             GoalEval {
                 q,
                 residual,
                 excess,
+                buffered_excess,
             }
         });
         let goal_excess = goal.as_ref().map_or(0.0, |g| g.excess);
@@ -410,76 +455,44 @@ impl Problem {
             && lin.violated(rows, w, LINEAR_TOLERANCE).is_empty()
     }
 
-    /// Build and solve the QP at `eval`; returns the solution and the
-    /// model's value at the current iterate.
-    #[allow(clippy::too_many_arguments)]
+    /// Build and solve the QP at `eval` by constraint generation over the
+    /// [`working_set`](super::working_set); returns the solution (optimal
+    /// for the full linearised QP) and the model's value at the current
+    /// iterate.
     fn subproblem(
         &self,
-        rows: &PhaseRows,
-        eval: &GridEval,
-        centre: &DVector<f64>,
-        rho: f64,
-        trust: Option<f64>,
-        screen_time: bool,
+        at: &Linearisation,
+        hint: &ActiveRows,
         ctl: &SolveControl,
-    ) -> std::result::Result<(super::qp::QpSolution, f64), QpFailure> {
+        stats: &mut SolveStats,
+    ) -> std::result::Result<(super::qp::QpSolution, f64, ActiveRows), QpFailure> {
+        let Linearisation {
+            exact,
+            rows,
+            eval,
+            centre,
+            rho,
+            trust,
+        } = *at;
         let mean = &self.prior.mean;
+        let target = self.clearance_m + CLEARANCE_BUFFER_M;
         let mut qp = Qp::new(self.whitening.dim());
         qp.center = centre.clone();
         qp.equalities = self.linear.equalities(&self.ends, mean);
-        let mut included = self.linear.screen_banded(rows, &eval.w, trust);
-        qp.inequalities = included
-            .iter()
-            .map(|&r| self.linear.inequality(rows, mean, r))
-            .collect();
         qp.inequalities.extend(self.linear.weight_bounds(
             self.whitening.factor(),
             mean,
             self.prior.n_basis,
         ));
-        let target = self.clearance_m + CLEARANCE_BUFFER_M;
-        let mut model_slack = 0.0;
-        let keep: Vec<Vec<bool>> = if screen_time {
-            screen_in_time(&eval.pairs, target)
-        } else {
-            eval.pairs
-                .iter()
-                .map(|pp| vec![true; pp.list.len()])
-                .collect()
-        };
-        for (k, pp) in eval.pairs.iter().enumerate() {
-            if !keep[k].iter().any(|&x| x) {
-                continue;
-            }
-            let jac = rows.position_jacobian(pp.phase);
-            for (i, c) in pp.list.iter().enumerate() {
-                if !keep[k][i] {
-                    continue;
-                }
-                let g = self
-                    .scene
-                    .clearance_gradient(&self.robot, &pp.q, &pp.frames, c);
-                let a = jac.tr_mul(&g);
-                qp.inequalities.push(Inequality {
-                    b: c.distance - a.dot(&eval.z) - target,
-                    a: -a,
-                    penalty: Some(rho),
-                });
-                model_slack += (target - c.distance).max(0.0);
-            }
-        }
-        if let (Some(goal), Some(ge)) = (&self.goal, &eval.goal) {
-            let j = self.robot.tcp_jacobian(&ge.q);
-            let linear = DMatrix::from_iterator(3, j.ncols(), j.rows(0, 3).iter().cloned());
-            let g = linear * self.ends.position_jacobian(1);
-            let gz = &g * &eval.z;
-            qp.cones.push(Cone {
-                offset: DVector::from_fn(3, |i, _| ge.residual[i] - gz[i]),
-                matrix: g,
-                radius: goal.tolerance_m,
-                penalty: rho,
-            });
-            model_slack += ge.excess;
+        let mut ids = vec![RowId::Other; qp.inequalities.len()];
+        let clearance = self.clearance_rows(rows, eval, target, rho);
+        let mut model_slack: f64 = clearance
+            .iter()
+            .map(|c| (target - c.distance).max(0.0))
+            .sum();
+        if let Some((cone, excess)) = self.goal_cone(eval, rho) {
+            qp.cones.push(cone);
+            model_slack += excess;
         }
         if let Some(r) = trust {
             qp.trust = Some((eval.z.clone(), r));
@@ -490,27 +503,170 @@ impl Problem {
             ..Default::default()
         };
         let model_here = eval.cost + rho * model_slack;
-        let mut sol = qp.solve(&settings)?;
-        // Row generation: add any grid row the solution violates (each
-        // round adds at least one of finitely many rows, so this ends).
-        loop {
-            let w = self.whitening.weights(&sol.z);
-            let missing: Vec<_> = self
-                .linear
-                .violated(rows, &w, LINEAR_TOLERANCE * 0.1)
-                .into_iter()
-                .filter(|r| !included.contains(r))
-                .collect();
-            if missing.is_empty() {
-                break;
-            }
-            for r in missing {
+
+        // The first working set: the rows active in the previous QP, thinned
+        // limit rows a step can reach, and thinned clearance rows within a
+        // band of the target.
+        let mut linear_in = HashSet::new();
+        let mut clearance_in = vec![false; clearance.len()];
+        for &r in &hint.linear {
+            if linear_in.insert(r) {
                 qp.inequalities.push(self.linear.inequality(rows, mean, r));
-                included.push(r);
+                ids.push(RowId::Linear(r));
             }
-            sol = qp.solve(&settings)?;
         }
-        Ok((sol, model_here))
+        let carried: Vec<usize> = (0..clearance.len())
+            .filter(|&i| hint.clearance.contains(&clearance[i].id()))
+            .collect();
+        add_clearance_rows(&mut qp, &mut ids, &mut clearance_in, &clearance, &carried);
+        let screened = self.linear.screen_banded(rows, &eval.w, trust);
+        self.add_linear_rows(&mut qp, &mut ids, &mut linear_in, rows, &eval.w, screened);
+        let initial = thin_in_time(
+            &clearance
+                .iter()
+                .map(|c| Candidate {
+                    key: c.key,
+                    phase: c.phase,
+                    score: -c.distance,
+                    in_band: c.distance < target + CLEARANCE_BAND_M,
+                })
+                .collect::<Vec<_>>(),
+        );
+        add_clearance_rows(&mut qp, &mut ids, &mut clearance_in, &clearance, &initial);
+
+        // Constraint generation until the solution violates no candidate
+        // (limit rows always; clearance rows for a few rounds, then the
+        // model is the working set's).
+        let mut round = 0;
+        loop {
+            round += 1;
+            let sol = qp.solve(&settings)?;
+            stats.qp_solves += 1;
+            stats.ipm_iterations += sol.ipm_iterations as usize;
+            stats.max_qp_rows = stats.max_qp_rows.max(sol.rows);
+            stats.max_qp_variables = stats.max_qp_variables.max(sol.variables);
+            let w = self.whitening.weights(&sol.z);
+            let linear_missing: Vec<RowRef> = self
+                .linear
+                .violated(rows, &w, GENERATION_TOLERANCE)
+                .into_iter()
+                .filter(|r| !linear_in.contains(r))
+                .collect();
+            let violated: Vec<usize> = (0..clearance.len())
+                .filter(|&i| !clearance_in[i])
+                .filter(|&i| clearance[i].violation(&sol.z) > GENERATION_TOLERANCE)
+                .collect();
+            if linear_missing.is_empty() && violated.is_empty() {
+                let active = active_rows(&ids, &sol, &clearance);
+                return Ok((sol, model_here, active));
+            }
+            if linear_missing.is_empty() && !exact && round >= WORKING_SET_ROUNDS {
+                let included_slack: f64 = (0..clearance.len())
+                    .filter(|&i| clearance_in[i])
+                    .map(|i| (target - clearance[i].distance).max(0.0))
+                    .sum();
+                let all_slack: f64 = clearance
+                    .iter()
+                    .map(|c| (target - c.distance).max(0.0))
+                    .sum();
+                let active = active_rows(&ids, &sol, &clearance);
+                return Ok((sol, model_here - rho * (all_slack - included_slack), active));
+            }
+            self.add_linear_rows(&mut qp, &mut ids, &mut linear_in, rows, &w, linear_missing);
+            let chosen = thin_in_time(
+                &violated
+                    .iter()
+                    .map(|&i| Candidate {
+                        key: clearance[i].key,
+                        phase: clearance[i].phase,
+                        score: clearance[i].violation(&sol.z),
+                        in_band: true,
+                    })
+                    .collect::<Vec<_>>(),
+            );
+            let chosen: Vec<usize> = chosen.into_iter().map(|k| violated[k]).collect();
+            add_clearance_rows(&mut qp, &mut ids, &mut clearance_in, &clearance, &chosen);
+        }
+    }
+
+    /// Every clearance pair of `eval` linearised at its iterate:
+    /// `d + ∇d·(z - z_k) >= target`, with an L1-penalised slack.
+    fn clearance_rows(
+        &self,
+        rows: &PhaseRows,
+        eval: &GridEval,
+        target: f64,
+        rho: f64,
+    ) -> Vec<ClearanceRow> {
+        eval.pairs
+            .iter()
+            .flat_map(|pp| {
+                let jac = rows.position_jacobian(pp.phase);
+                pp.list.iter().map(move |c| {
+                    let g = self
+                        .scene
+                        .clearance_gradient(&self.robot, &pp.q, &pp.frames, c);
+                    let a = jac.tr_mul(&g);
+                    ClearanceRow {
+                        phase_index: pp.phase,
+                        key: (c.shape, c.obstacle),
+                        phase: pp.phase_value,
+                        distance: c.distance,
+                        row: Inequality {
+                            b: c.distance - a.dot(&eval.z) - target,
+                            a: -a,
+                            penalty: Some(rho),
+                        },
+                    }
+                })
+            })
+            .collect()
+    }
+
+    /// The goal as a second-order cone linearised at `eval`, and its excess.
+    fn goal_cone(&self, eval: &GridEval, rho: f64) -> Option<(Cone, f64)> {
+        let (goal, ge) = (self.goal.as_ref()?, eval.goal.as_ref()?);
+        let j = self.robot.tcp_jacobian(&ge.q);
+        let linear = DMatrix::from_iterator(3, j.ncols(), j.rows(0, 3).iter().cloned());
+        let g = linear * self.ends.position_jacobian(1);
+        let gz = &g * &eval.z;
+        let cone = Cone {
+            offset: DVector::from_fn(3, |i, _| ge.residual[i] - gz[i]),
+            matrix: g,
+            radius: buffered_tolerance(goal.tolerance_m),
+            penalty: rho,
+        };
+        Some((cone, ge.buffered_excess))
+    }
+
+    /// Add `candidates` (thinned in time, scored by their excess at `w`)
+    /// to the QP's hard rows.
+    fn add_linear_rows(
+        &self,
+        qp: &mut Qp,
+        ids: &mut Vec<RowId>,
+        included: &mut HashSet<RowRef>,
+        rows: &PhaseRows,
+        w: &DVector<f64>,
+        candidates: Vec<RowRef>,
+    ) {
+        let scored: Vec<Candidate<(usize, RowKind)>> = candidates
+            .iter()
+            .map(|&r| Candidate {
+                key: (r.joint, r.kind),
+                phase: rows.phases()[r.phase],
+                score: self.linear.excess(rows, w, r),
+                in_band: true,
+            })
+            .collect();
+        for k in thin_in_time(&scored) {
+            let r = candidates[k];
+            if included.insert(r) {
+                qp.inequalities
+                    .push(self.linear.inequality(rows, &self.prior.mean, r));
+                ids.push(RowId::Linear(r));
+            }
+        }
     }
 
     /// The most violated non-linear constraint at `eval`, in words.
@@ -622,83 +778,108 @@ impl Problem {
     }
 }
 
-/// One phase of a (shape, obstacle) pair: phase value, index into the
-/// pairs, index into that phase's list, distance.
-type PairEntry = (f64, usize, usize, f64);
-
-/// Which clearance rows of `pairs` enter the QP. Clearance is smooth in
-/// time, so per (robot shape, obstacle) pair only the phases where its
-/// distance is a local minimum over the optimisation phases are kept, plus
-/// every [`VIOLATION_STRIDE`]-th phase of each run where the pair is short
-/// of `target`. The merit still counts every phase, and dense verification
-/// still checks everything, so this only changes which rows steer the step.
-fn screen_in_time(pairs: &[PhasePairs], target: f64) -> Vec<Vec<bool>> {
-    let mut keep: Vec<Vec<bool>> = pairs.iter().map(|pp| vec![false; pp.list.len()]).collect();
-    // (shape, obstacle) -> entries (phase value, pair-phase index, list index, distance).
-    let mut by_pair: std::collections::HashMap<(usize, usize), Vec<PairEntry>> =
-        std::collections::HashMap::new();
-    for (k, pp) in pairs.iter().enumerate() {
-        for (i, c) in pp.list.iter().enumerate() {
-            by_pair.entry((c.shape, c.obstacle)).or_default().push((
-                pp.phase_value,
-                k,
-                i,
-                c.distance,
-            ));
-        }
-    }
-    for entries in by_pair.values_mut() {
-        entries.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let n = entries.len();
-        let mut run = 0usize;
-        for e in 0..n {
-            let d = entries[e].3;
-            let before = if e > 0 {
-                entries[e - 1].3
-            } else {
-                f64::INFINITY
-            };
-            let after = if e + 1 < n {
-                entries[e + 1].3
-            } else {
-                f64::INFINITY
-            };
-            let minimum = d <= before && d <= after;
-            let short = d < target;
-            let thinned = if short {
-                run += 1;
-                (run - 1) % VIOLATION_STRIDE == 0
-            } else {
-                run = 0;
-                false
-            };
-            if minimum || thinned {
-                keep[entries[e].1][entries[e].2] = true;
-            }
-        }
-    }
-    keep
+/// A linearised clearance row of one (robot shape, obstacle) pair at one
+/// optimisation phase.
+struct ClearanceRow {
+    /// Index of the phase in the optimisation set.
+    phase_index: usize,
+    /// (robot shape, obstacle).
+    key: (usize, usize),
+    phase: f64,
+    /// Signed distance at the iterate the row is linearised at.
+    distance: f64,
+    row: Inequality,
 }
 
-/// Keep the `k` closest robot shapes per obstacle (order preserved).
-fn closest_per_obstacle(mut list: Vec<Clearance>, k: usize) -> Vec<Clearance> {
-    list.sort_by(|a, b| {
-        a.obstacle
-            .cmp(&b.obstacle)
-            .then(a.distance.total_cmp(&b.distance))
-    });
-    let mut out: Vec<Clearance> = Vec::with_capacity(list.len());
-    let mut run = 0;
-    for c in list {
-        run = match out.last() {
-            Some(prev) if prev.obstacle == c.obstacle => run + 1,
-            _ => 0,
-        };
-        if run < k {
-            out.push(c);
+impl ClearanceRow {
+    /// (phase index, robot shape, obstacle): the row's identity across
+    /// iterations.
+    fn id(&self) -> (usize, usize, usize) {
+        (self.phase_index, self.key.0, self.key.1)
+    }
+
+    /// How far `z` breaks the linearised row without slack (> 0: violated).
+    fn violation(&self, z: &DVector<f64>) -> f64 {
+        self.row.a.dot(z) - self.row.b
+    }
+}
+
+/// Add the clearance rows `chosen` (indices into `all`) to the QP.
+fn add_clearance_rows(
+    qp: &mut Qp,
+    ids: &mut Vec<RowId>,
+    included: &mut [bool],
+    all: &[ClearanceRow],
+    chosen: &[usize],
+) {
+    for &i in chosen {
+        if !included[i] {
+            included[i] = true;
+            qp.inequalities.push(all[i].row.clone());
+            ids.push(RowId::Clearance(i));
+        }
+    }
+}
+
+/// What one QP inequality is.
+#[derive(Clone, Copy, Debug)]
+enum RowId {
+    /// A limit or velocity row.
+    Linear(RowRef),
+    /// Index into the subproblem's clearance rows.
+    Clearance(usize),
+    /// An opt-in weight bound.
+    Other,
+}
+
+/// Rows active at a QP solution (positive multiplier): the start
+/// of the next QP's working set.
+#[derive(Clone, Debug, Default)]
+struct ActiveRows {
+    linear: Vec<RowRef>,
+    /// (phase index, robot shape, obstacle).
+    clearance: HashSet<(usize, usize, usize)>,
+}
+
+/// Multipliers below this fraction of the largest one count as inactive.
+const ACTIVE_DUAL_FRACTION: f64 = 1e-6;
+
+/// The rows of `ids` active at `sol`.
+fn active_rows(
+    ids: &[RowId],
+    sol: &super::qp::QpSolution,
+    clearance: &[ClearanceRow],
+) -> ActiveRows {
+    let largest = sol
+        .inequality_duals
+        .iter()
+        .fold(0.0f64, |m, &d| m.max(d.abs()));
+    let threshold = ACTIVE_DUAL_FRACTION * largest.max(1e-12);
+    let mut out = ActiveRows::default();
+    for (k, id) in ids.iter().enumerate() {
+        let active = sol.inequality_duals[k] > threshold;
+        match (*id, active) {
+            (RowId::Linear(r), true) => out.linear.push(r),
+            (RowId::Clearance(i), true) => {
+                out.clearance.insert(clearance[i].id());
+            }
+            _ => {}
         }
     }
     out
+}
+
+/// Where a subproblem is linearised.
+#[derive(Clone, Copy)]
+struct Linearisation<'a> {
+    /// Generate clearance rows until none is violated (else
+    /// [`WORKING_SET_ROUNDS`] rounds).
+    exact: bool,
+    rows: &'a PhaseRows,
+    eval: &'a GridEval,
+    centre: &'a DVector<f64>,
+    rho: f64,
+    trust: Option<f64>,
 }
 
 impl From<QpFailure> for Error {
