@@ -43,6 +43,8 @@ fn sweep(robot: &Robot, requests: &[OptimizeRequest]) {
     let mut total_ms = Vec::new();
     let mut iterations = Vec::new();
     let mut rows = Vec::new();
+    let mut solves = Vec::new();
+    let mut ipm_per_qp = Vec::new();
     let mut split = [0.0f64; 3];
     let (mut optimal, mut infeasible, mut max_iter, mut mean_feasible) = (0, 0, 0, 0);
     for req in requests {
@@ -58,6 +60,10 @@ fn sweep(robot: &Robot, requests: &[OptimizeRequest]) {
         solve_ms.push(t1.elapsed().as_secs_f64() * 1e3);
         iterations.push(sol.stats.iterations as f64);
         rows.push(sol.stats.max_qp_rows as f64);
+        solves.push(sol.stats.qp_solves as f64);
+        if sol.stats.qp_solves > 0 {
+            ipm_per_qp.push(sol.stats.ipm_iterations as f64 / sol.stats.qp_solves as f64);
+        }
         split[0] += sol.stats.qp_ms;
         split[1] += sol.stats.evaluation_ms;
         split[2] += sol.stats.verification_ms;
@@ -67,7 +73,14 @@ fn sweep(robot: &Robot, requests: &[OptimizeRequest]) {
             Status::MaxIterations => max_iter += 1,
         }
     }
-    for v in [&mut solve_ms, &mut total_ms, &mut iterations, &mut rows] {
+    for v in [
+        &mut solve_ms,
+        &mut total_ms,
+        &mut iterations,
+        &mut rows,
+        &mut solves,
+        &mut ipm_per_qp,
+    ] {
         v.sort_by(|a, b| a.total_cmp(b));
     }
     let n = requests.len();
@@ -95,6 +108,14 @@ fn sweep(robot: &Robot, requests: &[OptimizeRequest]) {
         percentile(&rows, 0.99),
         rows[n - 1]
     );
+    if !ipm_per_qp.is_empty() {
+        println!(
+            "  Clarabel solves per problem median {} p99 {}; interior-point iterations per solve median {:.1}",
+            percentile(&solves, 0.5),
+            percentile(&solves, 0.99),
+            percentile(&ipm_per_qp, 0.5)
+        );
+    }
     let total: f64 = solve_ms.iter().sum();
     println!(
         "  time split: QP build+solve {:.0} %, iterate evaluation {:.0} %, dense verification {:.0} %",

@@ -123,7 +123,7 @@ impl Default for SolverOptions {
     fn default() -> Self {
         SolverOptions {
             lambda: None,
-            max_iterations: 40,
+            max_iterations: 100,
             activation_distance_m: None,
             verify_factor: 4,
             seed: 0,

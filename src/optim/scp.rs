@@ -17,8 +17,10 @@
 //! prediction; otherwise the trust region shrinks. When the iteration
 //! stalls short of feasibility, generation becomes exact (every violated
 //! clearance row joins the QP), and only a stall on that full model raises
-//! the penalty, up to a cap, after which the problem is reported
-//! infeasible with the worst constraint. A converged feasible iterate is
+//! the penalty, up to a cap, after which the solve stops as
+//! `max_iterations` naming the worst constraint (`infeasible` is reserved
+//! for proofs: [`Problem::diagnose`]'s certificates and a QP whose hard
+//! limit rows Clarabel proves incompatible). A converged feasible iterate is
 //! verified densely; flagged phases join the optimisation set and the loop
 //! goes on.
 
@@ -370,11 +372,20 @@ impl Problem {
                 converged = false;
                 if rho > MAX_PENALTY {
                     stats.final_penalty = rho;
+                    // A stall of a non-convex penalty method is a local
+                    // minimum of the violation, not a proof: `infeasible` is
+                    // kept for the certificates of `diagnose` and the QP.
                     let reason = format!(
-                        "constraint cannot be satisfied: {}",
+                        "no feasible solution found: {} could not be reduced further at the largest penalty (a local minimum of the violation; the problem may be infeasible)",
                         self.worst_constraint(&eval)
                     );
-                    return Ok(self.unverified(Status::Infeasible, &eval, reason, stats, started));
+                    return Ok(self.unverified(
+                        Status::MaxIterations,
+                        &eval,
+                        reason,
+                        stats,
+                        started,
+                    ));
                 }
             }
         }
