@@ -258,13 +258,6 @@ impl Qp {
             tol_feas: settings.tolerance,
             max_iter: settings.max_iterations,
             time_limit: settings.time_limit.unwrap_or(f64::INFINITY),
-            // Measured on the typical problems (optim bench): looser
-            // iterative refinement and fewer equilibration passes save
-            // ~12 % of the solve time with the same statuses; refinement
-            // off altogether loses half the problems to numerical failures.
-            iterative_refinement_max_iter: 3,
-            iterative_refinement_reltol: 1e-9,
-            equilibrate_max_iter: 2,
             ..DefaultSettings::default()
         };
         let mut solver = DefaultSolver::new(&p, &q, &a, &b, &cones, qp_settings)

@@ -898,3 +898,84 @@ impl From<QpFailure> for Error {
         f.into_error()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::optim::example::{typical_request, ExampleSettings};
+    use crate::optim::linear::LinearSet;
+
+    /// The QP of every candidate row, built without the working set.
+    fn full_qp(p: &Problem, at: &Linearisation) -> Qp {
+        let target = p.clearance_m + CLEARANCE_BUFFER_M;
+        let mut qp = Qp::new(p.whitening.dim());
+        qp.center = at.centre.clone();
+        qp.equalities = p.linear.equalities(&p.ends, &p.prior.mean);
+        qp.inequalities = LinearSet::all_rows(at.rows)
+            .map(|r| p.linear.inequality(at.rows, &p.prior.mean, r))
+            .collect();
+        qp.inequalities.extend(
+            p.clearance_rows(at.rows, at.eval, target, at.rho)
+                .into_iter()
+                .map(|c| c.row),
+        );
+        if let Some((cone, _)) = p.goal_cone(at.eval, at.rho) {
+            qp.cones.push(cone);
+        }
+        qp.trust = at.trust.map(|r| (at.eval.z.clone(), r));
+        qp
+    }
+
+    #[test]
+    fn exact_constraint_generation_solves_the_full_qp() {
+        let robot = crate::robot::Robot::panda().unwrap();
+        for seed in [0, 4] {
+            let p = typical_request(&robot, seed, &ExampleSettings::default())
+                .unwrap()
+                .validate(&robot)
+                .unwrap();
+            let centre = DVector::zeros(p.whitening.dim());
+            // Linearise at a point off the prior mean (inside the limits).
+            let z0 = DVector::from_fn(p.whitening.dim(), |i, _| 0.05 * ((i % 5) as f64 - 2.0));
+            let eval = p.evaluate_grid(&p.grid, z0, &centre);
+            assert!(!eval.pairs.is_empty(), "seed {seed}: no clearance pair");
+            let at = Linearisation {
+                exact: true,
+                rows: &p.grid,
+                eval: &eval,
+                centre: &centre,
+                rho: 1e3,
+                trust: Some(2.0),
+            };
+            let mut stats = SolveStats::default();
+            let (sol, _, _) = p
+                .subproblem(
+                    &at,
+                    &ActiveRows::default(),
+                    &SolveControl::default(),
+                    &mut stats,
+                )
+                .unwrap();
+            let full = full_qp(&p, &at).solve(&QpSettings::default()).unwrap();
+            assert!(
+                stats.max_qp_rows < full.rows / 4,
+                "seed {seed}: working set {} rows of {}",
+                stats.max_qp_rows,
+                full.rows
+            );
+            // Clarabel stops at a 1e-8 duality gap; with the strongly convex
+            // |z|² that bounds |z - z*| by about sqrt(1e-8 x objective).
+            let gap = (&sol.z - &full.z).amax();
+            assert!(gap < 1e-4, "seed {seed}: |z - z_full| = {gap:e}");
+            // Rows left out may each be broken by up to GENERATION_TOLERANCE
+            // without their slack: at most ρ·1e-8 per row in the objective.
+            let rel = (sol.objective - full.objective).abs() / (1.0 + full.objective.abs());
+            assert!(
+                rel < 1e-6,
+                "seed {seed}: objective {} vs {}",
+                sol.objective,
+                full.objective
+            );
+        }
+    }
+}
