@@ -497,10 +497,7 @@ impl Problem {
         ));
         let mut ids = vec![RowId::Other; qp.inequalities.len()];
         let clearance = self.clearance_rows(rows, eval, target, rho);
-        let mut model_slack: f64 = clearance
-            .iter()
-            .map(|c| (target - c.distance).max(0.0))
-            .sum();
+        let mut model_slack: f64 = clearance.iter().map(|c| c.shortfall).sum();
         if let Some((cone, excess)) = self.goal_cone(eval, rho) {
             qp.cones.push(cone);
             model_slack += excess;
@@ -521,10 +518,7 @@ impl Problem {
         let mut linear_in = HashSet::new();
         let mut clearance_in = vec![false; clearance.len()];
         for &r in &hint.linear {
-            if linear_in.insert(r) {
-                qp.inequalities.push(self.linear.inequality(rows, mean, r));
-                ids.push(RowId::Linear(r));
-            }
+            self.add_linear_row(&mut qp, &mut ids, &mut linear_in, rows, r);
         }
         let carried: Vec<usize> = (0..clearance.len())
             .filter(|&i| hint.clearance.contains(&clearance[i].id()))
@@ -563,39 +557,38 @@ impl Problem {
                 .into_iter()
                 .filter(|r| !linear_in.contains(r))
                 .collect();
-            let violated: Vec<usize> = (0..clearance.len())
+            // (index, violation) of the clearance rows the solution breaks.
+            let violated: Vec<(usize, f64)> = (0..clearance.len())
                 .filter(|&i| !clearance_in[i])
-                .filter(|&i| clearance[i].violation(&sol.z) > GENERATION_TOLERANCE)
+                .map(|i| (i, clearance[i].violation(&sol.z)))
+                .filter(|&(_, v)| v > GENERATION_TOLERANCE)
                 .collect();
             if linear_missing.is_empty() && violated.is_empty() {
                 let active = active_rows(&ids, &sol, &clearance);
                 return Ok((sol, model_here, active));
             }
             if linear_missing.is_empty() && !exact && round >= WORKING_SET_ROUNDS {
-                let included_slack: f64 = (0..clearance.len())
-                    .filter(|&i| clearance_in[i])
-                    .map(|i| (target - clearance[i].distance).max(0.0))
-                    .sum();
-                let all_slack: f64 = clearance
-                    .iter()
-                    .map(|c| (target - c.distance).max(0.0))
+                // The model is the working set's: rows left out do not count.
+                let left_out: f64 = (0..clearance.len())
+                    .filter(|&i| !clearance_in[i])
+                    .map(|i| clearance[i].shortfall)
                     .sum();
                 let active = active_rows(&ids, &sol, &clearance);
-                return Ok((sol, model_here - rho * (all_slack - included_slack), active));
+                return Ok((sol, model_here - rho * left_out, active));
             }
             self.add_linear_rows(&mut qp, &mut ids, &mut linear_in, rows, &w, linear_missing);
             let chosen = thin_in_time(
                 &violated
                     .iter()
-                    .map(|&i| Candidate {
+                    .map(|&(i, v)| Candidate {
                         key: clearance[i].key,
                         phase: clearance[i].phase,
-                        score: clearance[i].violation(&sol.z),
+                        score: v,
                         in_band: true,
                     })
                     .collect::<Vec<_>>(),
             );
-            let chosen: Vec<usize> = chosen.into_iter().map(|k| violated[k]).collect();
+            let chosen: Vec<usize> = chosen.into_iter().map(|k| violated[k].0).collect();
             add_clearance_rows(&mut qp, &mut ids, &mut clearance_in, &clearance, &chosen);
         }
     }
@@ -623,6 +616,7 @@ impl Problem {
                         key: (c.shape, c.obstacle),
                         phase: pp.phase_value,
                         distance: c.distance,
+                        shortfall: (target - c.distance).max(0.0),
                         row: Inequality {
                             b: c.distance - a.dot(&eval.z) - target,
                             a: -a,
@@ -671,12 +665,23 @@ impl Problem {
             })
             .collect();
         for k in thin_in_time(&scored) {
-            let r = candidates[k];
-            if included.insert(r) {
-                qp.inequalities
-                    .push(self.linear.inequality(rows, &self.prior.mean, r));
-                ids.push(RowId::Linear(r));
-            }
+            self.add_linear_row(qp, ids, included, rows, candidates[k]);
+        }
+    }
+
+    /// Add limit row `r` to the QP unless it is already there.
+    fn add_linear_row(
+        &self,
+        qp: &mut Qp,
+        ids: &mut Vec<RowId>,
+        included: &mut HashSet<RowRef>,
+        rows: &PhaseRows,
+        r: RowRef,
+    ) {
+        if included.insert(r) {
+            qp.inequalities
+                .push(self.linear.inequality(rows, &self.prior.mean, r));
+            ids.push(RowId::Linear(r));
         }
     }
 
@@ -799,6 +804,8 @@ struct ClearanceRow {
     phase: f64,
     /// Signed distance at the iterate the row is linearised at.
     distance: f64,
+    /// `max(0, target - distance)`: the row's slack at that iterate.
+    shortfall: f64,
     row: Inequality,
 }
 
