@@ -92,8 +92,8 @@ proptest! {
         let c = scene.min_clearance(&robot, &robot.fk(&q)).unwrap();
         let (expect, _) = closed_form_sphere_clearance(&robot, &q, &center, radius);
         prop_assert!((c.distance - expect).abs() < 2e-5, "parry {} closed form {expect}", c.distance);
-        prop_assert_eq!(c.obstacle_id.as_str(), "s");
-        prop_assert_eq!(&c.link_name, &robot.link_names()[c.link]);
+        prop_assert_eq!(c.obstacle_id(&scene), "s");
+        prop_assert_eq!(c.link_name(&robot), robot.collision_shapes()[c.shape].link_name.as_str());
         // witness points: distance between them equals |distance|, the normal is unit
         let gap = Vector3::from(c.point_robot) - Vector3::from(c.point_obstacle);
         prop_assert!((gap.norm() - c.distance.abs()).abs() < 2e-5);
@@ -209,7 +209,7 @@ fn clearance_gradient_matches_finite_differences() {
             assert!(
                 (gradient[i] - fd).abs() < 2e-3 + 2e-3 * fd.abs(),
                 "{}: joint {i}: analytic {} fd {fd}",
-                c.obstacle_id,
+                c.obstacle_id(&scene),
                 gradient[i]
             );
         }

@@ -68,7 +68,7 @@ fn demos_start_at_home_reach_the_pregrasp_and_are_collision_free() {
                     c.distance > s.demos.clearance_m - 0.003,
                     "sample {k}: {} m to {}",
                     c.distance,
-                    c.obstacle_id
+                    c.obstacle_id(&scene)
                 );
             }
             assert!(d.min_clearance_m >= s.demos.clearance_m);

@@ -156,8 +156,8 @@ fn clearance_json(args: &ClearanceArgs) -> Result<Value> {
             let gradient = scene.clearance_gradient(&robot, &q, &frames, &c);
             json!({
                 "min_clearance_m": c.distance,
-                "link": c.link_name,
-                "obstacle": c.obstacle_id,
+                "link": c.link_name(&robot),
+                "obstacle": c.obstacle_id(&scene),
                 "shape": c.shape,
                 "point_robot": c.point_robot,
                 "point_obstacle": c.point_obstacle,

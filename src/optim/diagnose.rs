@@ -49,7 +49,10 @@ impl Problem {
         (c.distance < self.clearance_m - FEASIBILITY_TOLERANCE).then(|| {
             format!(
                 "start is in collision: link {} is {:.4} m from obstacle '{}' (clearance_m {:.4})",
-                c.link_name, c.distance, c.obstacle_id, self.clearance_m
+                c.link_name(&self.robot),
+                c.distance,
+                c.obstacle_id(&self.scene),
+                self.clearance_m
             )
         })
     }

@@ -698,7 +698,11 @@ impl Problem {
                         excess,
                         format!(
                             "clearance_m: link {} is {:.4} m from obstacle '{}' at t = {:.2} s (required {:.4} m)",
-                            c.link_name, c.distance, c.obstacle_id, t, self.clearance_m
+                            c.link_name(&self.robot),
+                            c.distance,
+                            c.obstacle_id(&self.scene),
+                            t,
+                            self.clearance_m
                         ),
                     ));
                 }

@@ -151,8 +151,8 @@ impl Problem {
             Some((p, c)) => (
                 Some(c.distance),
                 Some(Closest {
-                    link: c.link_name.clone(),
-                    obstacle: c.obstacle_id.clone(),
+                    link: c.link_name(&self.robot).to_string(),
+                    obstacle: c.obstacle_id(&self.scene).to_string(),
                     time_s: self.dense_phases[p] * self.duration,
                 }),
             ),

@@ -23,14 +23,12 @@ pub struct Clearance {
     pub distance: f64,
     /// Index into `robot.collision_shapes()`.
     pub shape: usize,
-    /// Index of the primitive's link in `robot.link_names()`.
+    /// Index of the primitive's link in `robot.link_names()`
+    /// ([`Clearance::link_name`] reads its name).
     pub link: usize,
-    /// Name of that link.
-    pub link_name: String,
-    /// Index of the obstacle in `scene.obstacles()`.
+    /// Index of the obstacle in `scene.obstacles()`
+    /// ([`Clearance::obstacle_id`] reads its id).
     pub obstacle: usize,
-    /// Its id.
-    pub obstacle_id: String,
     /// Witness point on the robot (base frame).
     pub point_robot: [f64; 3],
     /// Witness point on the obstacle (base frame).
@@ -38,6 +36,18 @@ pub struct Clearance {
     /// Unit normal from the obstacle towards the robot: moving the robot
     /// witness point along it increases the distance.
     pub normal: [f64; 3],
+}
+
+impl Clearance {
+    /// Name of the robot link, from the robot the query ran on.
+    pub fn link_name<'r>(&self, robot: &'r Robot) -> &'r str {
+        &robot.link_names()[self.link]
+    }
+
+    /// Id of the obstacle, from the scene the query ran on.
+    pub fn obstacle_id<'s>(&self, scene: &'s Scene) -> &'s str {
+        &scene.obstacles()[self.obstacle].id
+    }
 }
 
 /// A robot primitive placed by forward kinematics.
@@ -235,9 +245,7 @@ impl Scene {
             distance: contact.distance,
             shape,
             link: link_shape.link,
-            link_name: link_shape.link_name.clone(),
             obstacle,
-            obstacle_id: self.obstacles[obstacle].id.clone(),
             point_robot: contact.point_robot.into(),
             point_obstacle: contact.point_obstacle.into(),
             normal: contact.normal.into(),

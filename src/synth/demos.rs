@@ -334,7 +334,10 @@ impl DemoContext<'_> {
                 if c.distance < self.settings.clearance_m {
                     return Err(format!(
                         "clearance {:.4} m < {} m between {} and {} at sample {k}",
-                        c.distance, self.settings.clearance_m, c.link_name, c.obstacle_id
+                        c.distance,
+                        self.settings.clearance_m,
+                        c.link_name(self.robot),
+                        c.obstacle_id(&self.scene)
                     ));
                 }
                 min = min.min(c.distance);
