@@ -337,7 +337,7 @@ impl DemoContext<'_> {
                         c.distance,
                         self.settings.clearance_m,
                         c.link_name(self.robot),
-                        c.obstacle_id(&self.scene)
+                        c.obstacle_id(self.scene)
                     ));
                 }
                 min = min.min(c.distance);
