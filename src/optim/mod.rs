@@ -10,6 +10,8 @@
 //! - [`linear`] — limit, velocity, equality and opt-in weight-bound rows.
 //! - [`qp`] — one QP in Clarabel (CSC built directly).
 //! - [`scp`] — the trust-region SCP driver, [`SolveControl`], [`Solution`].
+//! - `evaluate` — one iterate on the optimisation phases: clearances, goal, merit.
+//! - `subproblem` — one QP: linearisation, working set, constraint generation.
 //! - [`verify`] — dense verification and the trajectory output.
 //! - [`working_set`] — which candidate rows each QP starts with and gains.
 //! - [`diagnose`] — infeasibility diagnosis before solving.
@@ -20,6 +22,7 @@
 //! the wall-clock `solve_ms` fields.
 
 pub mod diagnose;
+mod evaluate;
 pub mod example;
 pub mod linear;
 pub mod phases;
@@ -29,6 +32,7 @@ pub mod report;
 pub mod request;
 pub mod sampling;
 pub mod scp;
+mod subproblem;
 pub mod verify;
 pub mod whiten;
 pub mod working_set;

@@ -24,19 +24,15 @@
 //! verified densely; flagged phases join the optimisation set and the loop
 //! goes on.
 
-use super::linear::{RowKind, RowRef};
+use super::evaluate::GridEval;
 use super::phases::PhaseRows;
-use super::problem::{Problem, FEASIBILITY_TOLERANCE};
-use super::qp::{Cone, Inequality, Qp, QpFailure, QpSettings};
+use super::problem::Problem;
+use super::qp::{QpFailure, QpSolution};
 use super::report::{Status, TrajectoryReport};
+use super::subproblem::{ActiveRows, Linearisation};
 use super::verify::Verification;
-use super::working_set::{thin_in_time, Candidate};
-use crate::robot::Frames;
-use crate::scene::Clearance;
 use crate::{Error, Result};
-use nalgebra::{DMatrix, DVector, Vector3};
-use rayon::prelude::*;
-use std::collections::HashSet;
+use nalgebra::DVector;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
@@ -47,7 +43,7 @@ use std::time::Instant;
 pub const CLEARANCE_BUFFER_M: f64 = 2e-4;
 /// Goal tolerance the QP aims for: `tolerance_m` less a buffer of
 /// [`CLEARANCE_BUFFER_M`] (at most half the tolerance), for the same reason.
-fn buffered_tolerance(tolerance_m: f64) -> f64 {
+pub(super) fn buffered_tolerance(tolerance_m: f64) -> f64 {
     tolerance_m - CLEARANCE_BUFFER_M.min(0.5 * tolerance_m)
 }
 /// Largest L1 penalty before slack is declared irreducible.
@@ -61,20 +57,6 @@ const OPTIMALITY_TOLERANCE: f64 = 1e-3;
 pub const MAX_TRUST_REGION: f64 = 1e3;
 /// Smallest trust-region half-width before the iteration counts as stalled.
 pub const MIN_TRUST_REGION: f64 = 1e-4;
-/// Linear rows count as satisfied within this (rad, rad/s).
-const LINEAR_TOLERANCE: f64 = 1e-7;
-/// Clearance rows within this much of the target (m) start in the working
-/// set of each QP; the rest join by constraint generation.
-const CLEARANCE_BAND_M: f64 = 3e-3;
-/// A candidate row the QP solution breaks by more than this (rad, rad/s or
-/// m) joins the working set.
-const GENERATION_TOLERANCE: f64 = 1e-8;
-/// Generation rounds of clearance rows per QP while the iterate is being
-/// improved; limit rows are always generated to the end. One round (the
-/// working set as it stands) keeps QPs small in the early iterations, when
-/// hundreds of clearance rows are violated; the merit test guards the step,
-/// and a stall switches to exact generation (see [`Problem::solve`]).
-const WORKING_SET_ROUNDS: usize = 1;
 /// Most phases added per dense verification round.
 const MAX_ADDED_PER_ROUND: usize = 64;
 
@@ -103,7 +85,7 @@ impl SolveControl {
         None
     }
 
-    fn seconds_left(&self) -> Option<f64> {
+    pub(super) fn seconds_left(&self) -> Option<f64> {
         self.deadline
             .map(|d| d.saturating_duration_since(Instant::now()).as_secs_f64())
     }
@@ -136,8 +118,18 @@ pub struct SolveStats {
     pub verification_ms: f64,
 }
 
+impl SolveStats {
+    /// Count one Clarabel solve.
+    pub(super) fn count(&mut self, sol: &QpSolution) {
+        self.qp_solves += 1;
+        self.ipm_iterations += sol.ipm_iterations as usize;
+        self.max_qp_rows = self.max_qp_rows.max(sol.rows);
+        self.max_qp_variables = self.max_qp_variables.max(sol.variables);
+    }
+}
+
 /// Run `f`, adding its wall time in milliseconds to `acc`.
-fn timed<T>(acc: &mut f64, f: impl FnOnce() -> T) -> T {
+pub(super) fn timed<T>(acc: &mut f64, f: impl FnOnce() -> T) -> T {
     let t = Instant::now();
     let out = f();
     *acc += t.elapsed().as_secs_f64() * 1e3;
@@ -159,52 +151,6 @@ pub struct Solution {
     pub reason: Option<String>,
     /// Counters.
     pub stats: SolveStats,
-}
-
-/// Constraint values at one iterate on the optimisation phases.
-struct GridEval {
-    z: DVector<f64>,
-    w: DVector<f64>,
-    cost: f64,
-    /// Pairs within the activation distance, per phase that has any.
-    pairs: Vec<PhasePairs>,
-    /// Σ max(0, clearance_m + buffer - d).
-    buffered_violation: f64,
-    /// Σ max(0, clearance_m - d) + goal excess: what must reach zero.
-    true_violation: f64,
-    goal: Option<GoalEval>,
-    linear_ok: bool,
-}
-
-struct PhasePairs {
-    phase: usize,
-    phase_value: f64,
-    q: Vec<f64>,
-    frames: Frames,
-    list: Vec<Clearance>,
-}
-
-struct GoalEval {
-    q: Vec<f64>,
-    residual: Vector3<f64>,
-    /// Distance beyond `tolerance_m` (what must reach zero).
-    excess: f64,
-    /// Distance beyond the buffered tolerance the QP aims for (the merit's).
-    buffered_excess: f64,
-}
-
-impl GridEval {
-    fn merit(&self, rho: f64) -> f64 {
-        self.cost + rho * (self.buffered_violation + self.goal_excess())
-    }
-
-    fn goal_excess(&self) -> f64 {
-        self.goal.as_ref().map_or(0.0, |g| g.buffered_excess)
-    }
-
-    fn feasible(&self) -> bool {
-        self.linear_ok && self.true_violation <= FEASIBILITY_TOLERANCE
-    }
 }
 
 impl Problem {
@@ -401,336 +347,6 @@ impl Problem {
         rows.len() - before
     }
 
-    /// Evaluate constraints at `z` on the optimisation phases.
-    fn evaluate_grid(&self, rows: &PhaseRows, z: DVector<f64>, centre: &DVector<f64>) -> GridEval {
-        let w = self.whitening.weights(&z);
-        let target = self.clearance_m + CLEARANCE_BUFFER_M;
-        let pairs: Vec<PhasePairs> = if self.scene.is_empty() {
-            Vec::new()
-        } else {
-            (0..rows.len())
-                .into_par_iter()
-                .filter_map(|p| {
-                    let q = rows.position(p, &w);
-                    let frames = self.robot.fk(&q);
-                    let list =
-                        self.scene
-                            .clearances_within(&self.robot, &frames, self.activation_m);
-                    (!list.is_empty()).then_some(PhasePairs {
-                        phase: p,
-                        phase_value: rows.phases()[p],
-                        q,
-                        frames,
-                        list,
-                    })
-                })
-                .collect()
-        };
-        let mut buffered = 0.0;
-        let mut truth = 0.0;
-        for c in pairs.iter().flat_map(|pp| &pp.list) {
-            buffered += (target - c.distance).max(0.0);
-            truth += (self.clearance_m - c.distance).max(0.0);
-        }
-        let goal = self.goal.as_ref().map(|g| {
-            let q = self.ends.position(1, &w);
-            let p = self.robot.tcp_pose(&q).translation.vector;
-            let residual = p - Vector3::from(g.position);
-            let excess = (residual.norm() - g.tolerance_m).max(0.0);
-            let buffered_excess = (residual.norm() - buffered_tolerance(g.tolerance_m)).max(0.0);
-            GoalEval {
-                q,
-                residual,
-                excess,
-                buffered_excess,
-            }
-        });
-        let goal_excess = goal.as_ref().map_or(0.0, |g| g.excess);
-        let linear_ok = self.linear_ok(rows, &w);
-        GridEval {
-            cost: (&z - centre).norm_squared(),
-            z,
-            w,
-            pairs,
-            buffered_violation: buffered,
-            true_violation: truth + goal_excess,
-            goal,
-            linear_ok,
-        }
-    }
-
-    fn linear_ok(&self, rows: &PhaseRows, w: &DVector<f64>) -> bool {
-        let lin = &self.linear;
-        lin.equality_error(&self.ends, w) <= LINEAR_TOLERANCE
-            && lin.weight_bound_excess(w, self.prior.n_basis) <= LINEAR_TOLERANCE
-            && lin.violated(rows, w, LINEAR_TOLERANCE).is_empty()
-    }
-
-    /// Build and solve the QP at `eval` by constraint generation over the
-    /// [`working_set`](super::working_set); returns the solution (optimal
-    /// for the full linearised QP) and the model's value at the current
-    /// iterate.
-    fn subproblem(
-        &self,
-        at: &Linearisation,
-        hint: &ActiveRows,
-        ctl: &SolveControl,
-        stats: &mut SolveStats,
-    ) -> std::result::Result<(super::qp::QpSolution, f64, ActiveRows), QpFailure> {
-        let Linearisation {
-            exact,
-            rows,
-            eval,
-            centre,
-            rho,
-            trust,
-        } = *at;
-        let mean = &self.prior.mean;
-        let target = self.clearance_m + CLEARANCE_BUFFER_M;
-        let mut qp = Qp::new(self.whitening.dim());
-        qp.center = centre.clone();
-        qp.equalities = self.linear.equalities(&self.ends, mean);
-        qp.inequalities.extend(self.linear.weight_bounds(
-            self.whitening.factor(),
-            mean,
-            self.prior.n_basis,
-        ));
-        let mut ids = vec![RowId::Other; qp.inequalities.len()];
-        let clearance = self.clearance_rows(rows, eval, target, rho);
-        let mut model_slack: f64 = clearance.iter().map(|c| c.shortfall).sum();
-        if let Some((cone, excess)) = self.goal_cone(eval, rho) {
-            qp.cones.push(cone);
-            model_slack += excess;
-        }
-        if let Some(r) = trust {
-            qp.trust = Some((eval.z.clone(), r));
-        }
-        let settings = QpSettings {
-            tolerance: self.options.qp_tolerance,
-            time_limit: ctl.seconds_left(),
-            ..Default::default()
-        };
-        let model_here = eval.cost + rho * model_slack;
-
-        // The first working set: the rows active in the previous QP, thinned
-        // limit rows a step can reach, and thinned clearance rows within a
-        // band of the target.
-        let mut linear_in = HashSet::new();
-        let mut clearance_in = vec![false; clearance.len()];
-        for &r in &hint.linear {
-            self.add_linear_row(&mut qp, &mut ids, &mut linear_in, rows, r);
-        }
-        let carried: Vec<usize> = (0..clearance.len())
-            .filter(|&i| hint.clearance.contains(&clearance[i].id()))
-            .collect();
-        add_clearance_rows(&mut qp, &mut ids, &mut clearance_in, &clearance, &carried);
-        let screened = self.linear.screen_banded(rows, &eval.w, trust);
-        self.add_linear_rows(&mut qp, &mut ids, &mut linear_in, rows, &eval.w, screened);
-        let initial = thin_in_time(
-            &clearance
-                .iter()
-                .map(|c| Candidate {
-                    key: c.key,
-                    phase: c.phase,
-                    score: -c.distance,
-                    in_band: c.distance < target + CLEARANCE_BAND_M,
-                })
-                .collect::<Vec<_>>(),
-        );
-        add_clearance_rows(&mut qp, &mut ids, &mut clearance_in, &clearance, &initial);
-
-        // Constraint generation until the solution violates no candidate
-        // (limit rows always; clearance rows for a few rounds, then the
-        // model is the working set's).
-        let mut round = 0;
-        loop {
-            round += 1;
-            let sol = qp.solve(&settings)?;
-            stats.qp_solves += 1;
-            stats.ipm_iterations += sol.ipm_iterations as usize;
-            stats.max_qp_rows = stats.max_qp_rows.max(sol.rows);
-            stats.max_qp_variables = stats.max_qp_variables.max(sol.variables);
-            let w = self.whitening.weights(&sol.z);
-            let linear_missing: Vec<RowRef> = self
-                .linear
-                .violated(rows, &w, GENERATION_TOLERANCE)
-                .into_iter()
-                .filter(|r| !linear_in.contains(r))
-                .collect();
-            // (index, violation) of the clearance rows the solution breaks.
-            let violated: Vec<(usize, f64)> = (0..clearance.len())
-                .filter(|&i| !clearance_in[i])
-                .map(|i| (i, clearance[i].violation(&sol.z)))
-                .filter(|&(_, v)| v > GENERATION_TOLERANCE)
-                .collect();
-            if linear_missing.is_empty() && violated.is_empty() {
-                let active = active_rows(&ids, &sol, &clearance);
-                return Ok((sol, model_here, active));
-            }
-            if linear_missing.is_empty() && !exact && round >= WORKING_SET_ROUNDS {
-                // The model is the working set's: rows left out do not count.
-                let left_out: f64 = (0..clearance.len())
-                    .filter(|&i| !clearance_in[i])
-                    .map(|i| clearance[i].shortfall)
-                    .sum();
-                let active = active_rows(&ids, &sol, &clearance);
-                return Ok((sol, model_here - rho * left_out, active));
-            }
-            self.add_linear_rows(&mut qp, &mut ids, &mut linear_in, rows, &w, linear_missing);
-            let chosen = thin_in_time(
-                &violated
-                    .iter()
-                    .map(|&(i, v)| Candidate {
-                        key: clearance[i].key,
-                        phase: clearance[i].phase,
-                        score: v,
-                        in_band: true,
-                    })
-                    .collect::<Vec<_>>(),
-            );
-            let chosen: Vec<usize> = chosen.into_iter().map(|k| violated[k].0).collect();
-            add_clearance_rows(&mut qp, &mut ids, &mut clearance_in, &clearance, &chosen);
-        }
-    }
-
-    /// Every clearance pair of `eval` linearised at its iterate:
-    /// `d + ∇d·(z - z_k) >= target`, with an L1-penalised slack.
-    fn clearance_rows(
-        &self,
-        rows: &PhaseRows,
-        eval: &GridEval,
-        target: f64,
-        rho: f64,
-    ) -> Vec<ClearanceRow> {
-        eval.pairs
-            .iter()
-            .flat_map(|pp| {
-                let jac = rows.position_jacobian(pp.phase);
-                pp.list.iter().map(move |c| {
-                    let g = self
-                        .scene
-                        .clearance_gradient(&self.robot, &pp.q, &pp.frames, c);
-                    let a = jac.tr_mul(&g);
-                    ClearanceRow {
-                        phase_index: pp.phase,
-                        key: (c.shape, c.obstacle),
-                        phase: pp.phase_value,
-                        distance: c.distance,
-                        shortfall: (target - c.distance).max(0.0),
-                        row: Inequality {
-                            b: c.distance - a.dot(&eval.z) - target,
-                            a: -a,
-                            penalty: Some(rho),
-                        },
-                    }
-                })
-            })
-            .collect()
-    }
-
-    /// The goal as a second-order cone linearised at `eval`, and its excess.
-    fn goal_cone(&self, eval: &GridEval, rho: f64) -> Option<(Cone, f64)> {
-        let (goal, ge) = (self.goal.as_ref()?, eval.goal.as_ref()?);
-        let j = self.robot.tcp_jacobian(&ge.q);
-        let linear = DMatrix::from_iterator(3, j.ncols(), j.rows(0, 3).iter().cloned());
-        let g = linear * self.ends.position_jacobian(1);
-        let gz = &g * &eval.z;
-        let cone = Cone {
-            offset: DVector::from_fn(3, |i, _| ge.residual[i] - gz[i]),
-            matrix: g,
-            radius: buffered_tolerance(goal.tolerance_m),
-            penalty: rho,
-        };
-        Some((cone, ge.buffered_excess))
-    }
-
-    /// Add `candidates` (thinned in time, scored by their excess at `w`)
-    /// to the QP's hard rows.
-    fn add_linear_rows(
-        &self,
-        qp: &mut Qp,
-        ids: &mut Vec<RowId>,
-        included: &mut HashSet<RowRef>,
-        rows: &PhaseRows,
-        w: &DVector<f64>,
-        candidates: Vec<RowRef>,
-    ) {
-        let scored: Vec<Candidate<(usize, RowKind)>> = candidates
-            .iter()
-            .map(|&r| Candidate {
-                key: (r.joint, r.kind),
-                phase: rows.phases()[r.phase],
-                score: self.linear.excess(rows, w, r),
-                in_band: true,
-            })
-            .collect();
-        for k in thin_in_time(&scored) {
-            self.add_linear_row(qp, ids, included, rows, candidates[k]);
-        }
-    }
-
-    /// Add limit row `r` to the QP unless it is already there.
-    fn add_linear_row(
-        &self,
-        qp: &mut Qp,
-        ids: &mut Vec<RowId>,
-        included: &mut HashSet<RowRef>,
-        rows: &PhaseRows,
-        r: RowRef,
-    ) {
-        if included.insert(r) {
-            qp.inequalities
-                .push(self.linear.inequality(rows, &self.prior.mean, r));
-            ids.push(RowId::Linear(r));
-        }
-    }
-
-    /// The most violated non-linear constraint at `eval`, in words.
-    fn worst_constraint(&self, eval: &GridEval) -> String {
-        let mut worst: Option<(f64, String)> = None;
-        for pp in &eval.pairs {
-            for c in &pp.list {
-                let excess = self.clearance_m - c.distance;
-                if excess > FEASIBILITY_TOLERANCE && worst.as_ref().is_none_or(|(e, _)| excess > *e)
-                {
-                    let t = pp.phase_value * self.duration;
-                    worst = Some((
-                        excess,
-                        format!(
-                            "clearance_m: link {} is {:.4} m from obstacle '{}' at t = {:.2} s (required {:.4} m)",
-                            c.link_name(&self.robot),
-                            c.distance,
-                            c.obstacle_id(&self.scene),
-                            t,
-                            self.clearance_m
-                        ),
-                    ));
-                }
-            }
-        }
-        if let (Some(goal), Some(ge)) = (&self.goal, &eval.goal) {
-            if ge.excess > FEASIBILITY_TOLERANCE
-                && worst.as_ref().is_none_or(|(e, _)| ge.excess > *e)
-            {
-                worst = Some((
-                    ge.excess,
-                    format!(
-                        "goal: the TCP ends {:.4} m from the goal (tolerance_m {:.4})",
-                        ge.residual.norm(),
-                        goal.tolerance_m
-                    ),
-                ));
-            }
-        }
-        match worst {
-            Some((_, text)) => text,
-            None if !eval.linear_ok => {
-                "joint limits / velocity limits / start configuration".into()
-            }
-            None => "no constraint violated on the optimisation phases".into(),
-        }
-    }
-
     /// Finish without a prior verification (it is run here) and with `reason`.
     fn unverified(
         &self,
@@ -798,195 +414,8 @@ impl Problem {
     }
 }
 
-/// A linearised clearance row of one (robot shape, obstacle) pair at one
-/// optimisation phase.
-struct ClearanceRow {
-    /// Index of the phase in the optimisation set.
-    phase_index: usize,
-    /// (robot shape, obstacle).
-    key: (usize, usize),
-    phase: f64,
-    /// Signed distance at the iterate the row is linearised at.
-    distance: f64,
-    /// `max(0, target - distance)`: the row's slack at that iterate.
-    shortfall: f64,
-    row: Inequality,
-}
-
-impl ClearanceRow {
-    /// (phase index, robot shape, obstacle): the row's identity across
-    /// iterations.
-    fn id(&self) -> (usize, usize, usize) {
-        (self.phase_index, self.key.0, self.key.1)
-    }
-
-    /// How far `z` breaks the linearised row without slack (> 0: violated).
-    fn violation(&self, z: &DVector<f64>) -> f64 {
-        self.row.a.dot(z) - self.row.b
-    }
-}
-
-/// Add the clearance rows `chosen` (indices into `all`) to the QP.
-fn add_clearance_rows(
-    qp: &mut Qp,
-    ids: &mut Vec<RowId>,
-    included: &mut [bool],
-    all: &[ClearanceRow],
-    chosen: &[usize],
-) {
-    for &i in chosen {
-        if !included[i] {
-            included[i] = true;
-            qp.inequalities.push(all[i].row.clone());
-            ids.push(RowId::Clearance(i));
-        }
-    }
-}
-
-/// What one QP inequality is.
-#[derive(Clone, Copy, Debug)]
-enum RowId {
-    /// A limit or velocity row.
-    Linear(RowRef),
-    /// Index into the subproblem's clearance rows.
-    Clearance(usize),
-    /// An opt-in weight bound.
-    Other,
-}
-
-/// Rows active at a QP solution (positive multiplier): the start
-/// of the next QP's working set.
-#[derive(Clone, Debug, Default)]
-struct ActiveRows {
-    linear: Vec<RowRef>,
-    /// (phase index, robot shape, obstacle).
-    clearance: HashSet<(usize, usize, usize)>,
-}
-
-/// Multipliers below this fraction of the largest one count as inactive.
-const ACTIVE_DUAL_FRACTION: f64 = 1e-6;
-
-/// The rows of `ids` active at `sol`.
-fn active_rows(
-    ids: &[RowId],
-    sol: &super::qp::QpSolution,
-    clearance: &[ClearanceRow],
-) -> ActiveRows {
-    let largest = sol
-        .inequality_duals
-        .iter()
-        .fold(0.0f64, |m, &d| m.max(d.abs()));
-    let threshold = ACTIVE_DUAL_FRACTION * largest.max(1e-12);
-    let mut out = ActiveRows::default();
-    for (k, id) in ids.iter().enumerate() {
-        let active = sol.inequality_duals[k] > threshold;
-        match (*id, active) {
-            (RowId::Linear(r), true) => out.linear.push(r),
-            (RowId::Clearance(i), true) => {
-                out.clearance.insert(clearance[i].id());
-            }
-            _ => {}
-        }
-    }
-    out
-}
-
-/// Where a subproblem is linearised.
-#[derive(Clone, Copy)]
-struct Linearisation<'a> {
-    /// Generate clearance rows until none is violated (else
-    /// [`WORKING_SET_ROUNDS`] rounds).
-    exact: bool,
-    rows: &'a PhaseRows,
-    eval: &'a GridEval,
-    centre: &'a DVector<f64>,
-    rho: f64,
-    trust: Option<f64>,
-}
-
 impl From<QpFailure> for Error {
     fn from(f: QpFailure) -> Error {
         f.into_error()
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::optim::example::{typical_request, ExampleSettings};
-    use crate::optim::linear::LinearSet;
-
-    /// The QP of every candidate row, built without the working set.
-    fn full_qp(p: &Problem, at: &Linearisation) -> Qp {
-        let target = p.clearance_m + CLEARANCE_BUFFER_M;
-        let mut qp = Qp::new(p.whitening.dim());
-        qp.center = at.centre.clone();
-        qp.equalities = p.linear.equalities(&p.ends, &p.prior.mean);
-        qp.inequalities = LinearSet::all_rows(at.rows)
-            .map(|r| p.linear.inequality(at.rows, &p.prior.mean, r))
-            .collect();
-        qp.inequalities.extend(
-            p.clearance_rows(at.rows, at.eval, target, at.rho)
-                .into_iter()
-                .map(|c| c.row),
-        );
-        if let Some((cone, _)) = p.goal_cone(at.eval, at.rho) {
-            qp.cones.push(cone);
-        }
-        qp.trust = at.trust.map(|r| (at.eval.z.clone(), r));
-        qp
-    }
-
-    #[test]
-    fn exact_constraint_generation_solves_the_full_qp() {
-        let robot = crate::robot::Robot::panda().unwrap();
-        for seed in [0, 4] {
-            let p = typical_request(&robot, seed, &ExampleSettings::default())
-                .unwrap()
-                .validate(&robot)
-                .unwrap();
-            let centre = DVector::zeros(p.whitening.dim());
-            // Linearise at a point off the prior mean (inside the limits).
-            let z0 = DVector::from_fn(p.whitening.dim(), |i, _| 0.05 * ((i % 5) as f64 - 2.0));
-            let eval = p.evaluate_grid(&p.grid, z0, &centre);
-            assert!(!eval.pairs.is_empty(), "seed {seed}: no clearance pair");
-            let at = Linearisation {
-                exact: true,
-                rows: &p.grid,
-                eval: &eval,
-                centre: &centre,
-                rho: 1e3,
-                trust: Some(2.0),
-            };
-            let mut stats = SolveStats::default();
-            let (sol, _, _) = p
-                .subproblem(
-                    &at,
-                    &ActiveRows::default(),
-                    &SolveControl::default(),
-                    &mut stats,
-                )
-                .unwrap();
-            let full = full_qp(&p, &at).solve(&QpSettings::default()).unwrap();
-            assert!(
-                stats.max_qp_rows < full.rows / 4,
-                "seed {seed}: working set {} rows of {}",
-                stats.max_qp_rows,
-                full.rows
-            );
-            // Clarabel stops at a 1e-8 duality gap; with the strongly convex
-            // |z|² that bounds |z - z*| by about sqrt(1e-8 x objective).
-            let gap = (&sol.z - &full.z).amax();
-            assert!(gap < 1e-4, "seed {seed}: |z - z_full| = {gap:e}");
-            // Rows left out may each be broken by up to GENERATION_TOLERANCE
-            // without their slack: at most ρ·1e-8 per row in the objective.
-            let rel = (sol.objective - full.objective).abs() / (1.0 + full.objective.abs());
-            assert!(
-                rel < 1e-6,
-                "seed {seed}: objective {} vs {}",
-                sol.objective,
-                full.objective
-            );
-        }
     }
 }

@@ -1,0 +1,180 @@
+//! One SCP iterate evaluated on the optimisation phases: forward
+//! kinematics, every clearance pair within the activation distance (parry),
+//! the goal residual, the limit rows, and the merit the step test uses.
+
+use super::phases::PhaseRows;
+use super::problem::{Problem, FEASIBILITY_TOLERANCE};
+use super::scp::{buffered_tolerance, CLEARANCE_BUFFER_M};
+use crate::robot::Frames;
+use crate::scene::Clearance;
+use nalgebra::{DVector, Vector3};
+use rayon::prelude::*;
+
+/// Linear rows count as satisfied within this (rad, rad/s).
+pub(super) const LINEAR_TOLERANCE: f64 = 1e-7;
+
+/// Constraint values at one iterate on the optimisation phases.
+pub(super) struct GridEval {
+    pub(super) z: DVector<f64>,
+    pub(super) w: DVector<f64>,
+    pub(super) cost: f64,
+    /// Pairs within the activation distance, per phase that has any.
+    pub(super) pairs: Vec<PhasePairs>,
+    /// Σ max(0, clearance_m + buffer - d).
+    pub(super) buffered_violation: f64,
+    /// Σ max(0, clearance_m - d) + goal excess: what must reach zero.
+    pub(super) true_violation: f64,
+    pub(super) goal: Option<GoalEval>,
+    pub(super) linear_ok: bool,
+}
+
+pub(super) struct PhasePairs {
+    pub(super) phase: usize,
+    pub(super) phase_value: f64,
+    pub(super) q: Vec<f64>,
+    pub(super) frames: Frames,
+    pub(super) list: Vec<Clearance>,
+}
+
+pub(super) struct GoalEval {
+    pub(super) q: Vec<f64>,
+    pub(super) residual: Vector3<f64>,
+    /// Distance beyond `tolerance_m` (what must reach zero).
+    pub(super) excess: f64,
+    /// Distance beyond the buffered tolerance the QP aims for (the merit's).
+    pub(super) buffered_excess: f64,
+}
+
+impl GridEval {
+    pub(super) fn merit(&self, rho: f64) -> f64 {
+        self.cost + rho * (self.buffered_violation + self.goal_excess())
+    }
+
+    pub(super) fn goal_excess(&self) -> f64 {
+        self.goal.as_ref().map_or(0.0, |g| g.buffered_excess)
+    }
+
+    pub(super) fn feasible(&self) -> bool {
+        self.linear_ok && self.true_violation <= FEASIBILITY_TOLERANCE
+    }
+}
+
+impl Problem {
+    /// Evaluate constraints at `z` on the optimisation phases.
+    pub(super) fn evaluate_grid(
+        &self,
+        rows: &PhaseRows,
+        z: DVector<f64>,
+        centre: &DVector<f64>,
+    ) -> GridEval {
+        let w = self.whitening.weights(&z);
+        let target = self.clearance_m + CLEARANCE_BUFFER_M;
+        let pairs: Vec<PhasePairs> = if self.scene.is_empty() {
+            Vec::new()
+        } else {
+            (0..rows.len())
+                .into_par_iter()
+                .filter_map(|p| {
+                    let q = rows.position(p, &w);
+                    let frames = self.robot.fk(&q);
+                    let list =
+                        self.scene
+                            .clearances_within(&self.robot, &frames, self.activation_m);
+                    (!list.is_empty()).then_some(PhasePairs {
+                        phase: p,
+                        phase_value: rows.phases()[p],
+                        q,
+                        frames,
+                        list,
+                    })
+                })
+                .collect()
+        };
+        let mut buffered = 0.0;
+        let mut truth = 0.0;
+        for c in pairs.iter().flat_map(|pp| &pp.list) {
+            buffered += (target - c.distance).max(0.0);
+            truth += (self.clearance_m - c.distance).max(0.0);
+        }
+        let goal = self.goal.as_ref().map(|g| {
+            let q = self.ends.position(1, &w);
+            let p = self.robot.tcp_pose(&q).translation.vector;
+            let residual = p - Vector3::from(g.position);
+            let excess = (residual.norm() - g.tolerance_m).max(0.0);
+            let buffered_excess = (residual.norm() - buffered_tolerance(g.tolerance_m)).max(0.0);
+            GoalEval {
+                q,
+                residual,
+                excess,
+                buffered_excess,
+            }
+        });
+        let goal_excess = goal.as_ref().map_or(0.0, |g| g.excess);
+        let linear_ok = self.linear_ok(rows, &w);
+        GridEval {
+            cost: (&z - centre).norm_squared(),
+            z,
+            w,
+            pairs,
+            buffered_violation: buffered,
+            true_violation: truth + goal_excess,
+            goal,
+            linear_ok,
+        }
+    }
+
+    /// Whether `w` satisfies the equality, weight-bound and limit rows of
+    /// the optimisation phases (within [`LINEAR_TOLERANCE`]).
+    fn linear_ok(&self, rows: &PhaseRows, w: &DVector<f64>) -> bool {
+        let lin = &self.linear;
+        lin.equality_error(&self.ends, w) <= LINEAR_TOLERANCE
+            && lin.weight_bound_excess(w, self.prior.n_basis) <= LINEAR_TOLERANCE
+            && lin.violated(rows, w, LINEAR_TOLERANCE).is_empty()
+    }
+
+    /// The most violated non-linear constraint at `eval`, in words.
+    pub(super) fn worst_constraint(&self, eval: &GridEval) -> String {
+        let mut worst: Option<(f64, String)> = None;
+        for pp in &eval.pairs {
+            for c in &pp.list {
+                let excess = self.clearance_m - c.distance;
+                if excess > FEASIBILITY_TOLERANCE && worst.as_ref().is_none_or(|(e, _)| excess > *e)
+                {
+                    let t = pp.phase_value * self.duration;
+                    worst = Some((
+                        excess,
+                        format!(
+                            "clearance_m: link {} is {:.4} m from obstacle '{}' at t = {:.2} s (required {:.4} m)",
+                            c.link_name(&self.robot),
+                            c.distance,
+                            c.obstacle_id(&self.scene),
+                            t,
+                            self.clearance_m
+                        ),
+                    ));
+                }
+            }
+        }
+        if let (Some(goal), Some(ge)) = (&self.goal, &eval.goal) {
+            if ge.excess > FEASIBILITY_TOLERANCE
+                && worst.as_ref().is_none_or(|(e, _)| ge.excess > *e)
+            {
+                worst = Some((
+                    ge.excess,
+                    format!(
+                        "goal: the TCP ends {:.4} m from the goal (tolerance_m {:.4})",
+                        ge.residual.norm(),
+                        goal.tolerance_m
+                    ),
+                ));
+            }
+        }
+        match worst {
+            Some((_, text)) => text,
+            None if !eval.linear_ok => {
+                "joint limits / velocity limits / start configuration".into()
+            }
+            None => "no constraint violated on the optimisation phases".into(),
+        }
+    }
+}

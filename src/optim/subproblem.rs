@@ -1,0 +1,456 @@
+//! One SCP subproblem: the clearance pairs and the goal linearised at the
+//! iterate, assembled into a [`Qp`] over a [working set](super::working_set)
+//! of rows and solved by constraint generation.
+
+use super::evaluate::GridEval;
+use super::linear::{RowKind, RowRef};
+use super::phases::PhaseRows;
+use super::problem::Problem;
+use super::qp::{Cone, Inequality, Qp, QpFailure, QpSettings, QpSolution};
+use super::scp::{buffered_tolerance, SolveControl, SolveStats, CLEARANCE_BUFFER_M};
+use super::working_set::{thin_in_time, Candidate};
+use nalgebra::{DMatrix, DVector};
+use std::collections::HashSet;
+
+/// Clearance rows within this much of the target (m) start in the working
+/// set of each QP; the rest join by constraint generation.
+const CLEARANCE_BAND_M: f64 = 3e-3;
+/// A candidate row the QP solution breaks by more than this (rad, rad/s or
+/// m) joins the working set.
+const GENERATION_TOLERANCE: f64 = 1e-8;
+/// Generation rounds of clearance rows per QP while the iterate is being
+/// improved; limit rows are always generated to the end. One round (the
+/// working set as it stands) keeps QPs small in the early iterations, when
+/// hundreds of clearance rows are violated; the merit test guards the step,
+/// and a stall switches to exact generation (see [`Problem::solve`]).
+const WORKING_SET_ROUNDS: usize = 1;
+
+impl Problem {
+    /// Build and solve the QP at `eval` by constraint generation over the
+    /// [`working_set`](super::working_set); returns the solution (optimal
+    /// for the full linearised QP, or for the working set's model after
+    /// [`WORKING_SET_ROUNDS`] unless `at.exact`), the model's value at the
+    /// current iterate, and the rows active at the solution.
+    pub(super) fn subproblem(
+        &self,
+        at: &Linearisation,
+        hint: &ActiveRows,
+        ctl: &SolveControl,
+        stats: &mut SolveStats,
+    ) -> std::result::Result<(QpSolution, f64, ActiveRows), QpFailure> {
+        let target = self.clearance_m + CLEARANCE_BUFFER_M;
+        let clearance = self.clearance_rows(at.rows, at.eval, target, at.rho);
+        let mut model_slack: f64 = clearance.iter().map(|c| c.shortfall).sum();
+        let mut work = WorkingQp::new(self.base_qp(at), &clearance);
+        if let Some((cone, excess)) = self.goal_cone(at.eval, at.rho) {
+            work.qp.cones.push(cone);
+            model_slack += excess;
+        }
+        let model_here = at.eval.cost + at.rho * model_slack;
+        self.first_working_set(&mut work, at, hint, target);
+        let settings = QpSettings {
+            tolerance: self.options.qp_tolerance,
+            time_limit: ctl.seconds_left(),
+            ..Default::default()
+        };
+        let mut round = 0;
+        loop {
+            round += 1;
+            let sol = work.qp.solve(&settings)?;
+            stats.count(&sol);
+            let w = self.whitening.weights(&sol.z);
+            let linear_missing: Vec<RowRef> = self
+                .linear
+                .violated(at.rows, &w, GENERATION_TOLERANCE)
+                .into_iter()
+                .filter(|r| !work.linear_in.contains(r))
+                .collect();
+            let violated = work.violated_clearance(&sol.z);
+            if linear_missing.is_empty() && violated.is_empty() {
+                let active = work.active_rows(&sol);
+                return Ok((sol, model_here, active));
+            }
+            if linear_missing.is_empty() && !at.exact && round >= WORKING_SET_ROUNDS {
+                // The model is the working set's: rows left out do not count.
+                let active = work.active_rows(&sol);
+                return Ok((sol, model_here - at.rho * work.left_out_shortfall(), active));
+            }
+            self.add_linear_rows(&mut work, at.rows, &w, linear_missing);
+            work.add_clearance(&thin_violated(&clearance, &violated));
+        }
+    }
+
+    /// The QP's cost centre, equalities, opt-in weight bounds and trust
+    /// region: everything but the limit, clearance and goal rows.
+    fn base_qp(&self, at: &Linearisation) -> Qp {
+        let mean = &self.prior.mean;
+        let mut qp = Qp::new(self.whitening.dim());
+        qp.center = at.centre.clone();
+        qp.equalities = self.linear.equalities(&self.ends, mean);
+        qp.inequalities.extend(self.linear.weight_bounds(
+            self.whitening.factor(),
+            mean,
+            self.prior.n_basis,
+        ));
+        if let Some(r) = at.trust {
+            qp.trust = Some((at.eval.z.clone(), r));
+        }
+        qp
+    }
+
+    /// The first working set: the rows active in the previous QP, thinned
+    /// limit rows a step can reach, and thinned clearance rows within
+    /// [`CLEARANCE_BAND_M`] of the target.
+    fn first_working_set(
+        &self,
+        work: &mut WorkingQp,
+        at: &Linearisation,
+        hint: &ActiveRows,
+        target: f64,
+    ) {
+        for &r in &hint.linear {
+            self.add_linear_row(work, at.rows, r);
+        }
+        let carried: Vec<usize> = (0..work.clearance.len())
+            .filter(|&i| hint.clearance.contains(&work.clearance[i].id()))
+            .collect();
+        work.add_clearance(&carried);
+        let screened = self.linear.screen_banded(at.rows, &at.eval.w, at.trust);
+        self.add_linear_rows(work, at.rows, &at.eval.w, screened);
+        let near = thin_in_time(
+            &work
+                .clearance
+                .iter()
+                .map(|c| Candidate {
+                    key: c.key,
+                    phase: c.phase,
+                    score: -c.distance,
+                    in_band: c.distance < target + CLEARANCE_BAND_M,
+                })
+                .collect::<Vec<_>>(),
+        );
+        work.add_clearance(&near);
+    }
+
+    /// Every clearance pair of `eval` linearised at its iterate:
+    /// `d + ∇d·(z - z_k) >= target`, with an L1-penalised slack.
+    fn clearance_rows(
+        &self,
+        rows: &PhaseRows,
+        eval: &GridEval,
+        target: f64,
+        rho: f64,
+    ) -> Vec<ClearanceRow> {
+        eval.pairs
+            .iter()
+            .flat_map(|pp| {
+                let jac = rows.position_jacobian(pp.phase);
+                pp.list.iter().map(move |c| {
+                    let g = self
+                        .scene
+                        .clearance_gradient(&self.robot, &pp.q, &pp.frames, c);
+                    let a = jac.tr_mul(&g);
+                    ClearanceRow {
+                        phase_index: pp.phase,
+                        key: (c.shape, c.obstacle),
+                        phase: pp.phase_value,
+                        distance: c.distance,
+                        shortfall: (target - c.distance).max(0.0),
+                        row: Inequality {
+                            b: c.distance - a.dot(&eval.z) - target,
+                            a: -a,
+                            penalty: Some(rho),
+                        },
+                    }
+                })
+            })
+            .collect()
+    }
+
+    /// The goal as a second-order cone linearised at `eval`, and its excess.
+    fn goal_cone(&self, eval: &GridEval, rho: f64) -> Option<(Cone, f64)> {
+        let (goal, ge) = (self.goal.as_ref()?, eval.goal.as_ref()?);
+        let j = self.robot.tcp_jacobian(&ge.q);
+        let linear = DMatrix::from_iterator(3, j.ncols(), j.rows(0, 3).iter().cloned());
+        let g = linear * self.ends.position_jacobian(1);
+        let gz = &g * &eval.z;
+        let cone = Cone {
+            offset: DVector::from_fn(3, |i, _| ge.residual[i] - gz[i]),
+            matrix: g,
+            radius: buffered_tolerance(goal.tolerance_m),
+            penalty: rho,
+        };
+        Some((cone, ge.buffered_excess))
+    }
+
+    /// Add `candidates` (thinned in time, scored by their excess at `w`)
+    /// to the QP's hard rows.
+    fn add_linear_rows(
+        &self,
+        work: &mut WorkingQp,
+        rows: &PhaseRows,
+        w: &DVector<f64>,
+        candidates: Vec<RowRef>,
+    ) {
+        let scored: Vec<Candidate<(usize, RowKind)>> = candidates
+            .iter()
+            .map(|&r| Candidate {
+                key: (r.joint, r.kind),
+                phase: rows.phases()[r.phase],
+                score: self.linear.excess(rows, w, r),
+                in_band: true,
+            })
+            .collect();
+        for k in thin_in_time(&scored) {
+            self.add_linear_row(work, rows, candidates[k]);
+        }
+    }
+
+    /// Add limit row `r` to the QP unless it is already there.
+    fn add_linear_row(&self, work: &mut WorkingQp, rows: &PhaseRows, r: RowRef) {
+        if work.linear_in.insert(r) {
+            let row = self.linear.inequality(rows, &self.prior.mean, r);
+            work.qp.inequalities.push(row);
+            work.ids.push(RowId::Linear(r));
+        }
+    }
+}
+
+/// A linearised clearance row of one (robot shape, obstacle) pair at one
+/// optimisation phase.
+struct ClearanceRow {
+    /// Index of the phase in the optimisation set.
+    phase_index: usize,
+    /// (robot shape, obstacle).
+    key: (usize, usize),
+    phase: f64,
+    /// Signed distance at the iterate the row is linearised at.
+    distance: f64,
+    /// `max(0, target - distance)`: the row's slack at that iterate.
+    shortfall: f64,
+    row: Inequality,
+}
+
+impl ClearanceRow {
+    /// (phase index, robot shape, obstacle): the row's identity across
+    /// iterations.
+    fn id(&self) -> (usize, usize, usize) {
+        (self.phase_index, self.key.0, self.key.1)
+    }
+
+    /// How far `z` breaks the linearised row without slack (> 0: violated).
+    fn violation(&self, z: &DVector<f64>) -> f64 {
+        self.row.a.dot(z) - self.row.b
+    }
+}
+
+/// A QP under construction and which candidate rows it holds.
+struct WorkingQp<'c> {
+    qp: Qp,
+    /// What each of `qp.inequalities` is.
+    ids: Vec<RowId>,
+    /// Limit rows in the QP.
+    linear_in: HashSet<RowRef>,
+    /// Every clearance row of the linearisation (the candidates).
+    clearance: &'c [ClearanceRow],
+    /// Which of `clearance` are in the QP.
+    clearance_in: Vec<bool>,
+}
+
+impl<'c> WorkingQp<'c> {
+    /// `qp`'s own inequalities count as [`RowId::Other`].
+    fn new(qp: Qp, clearance: &'c [ClearanceRow]) -> Self {
+        WorkingQp {
+            ids: vec![RowId::Other; qp.inequalities.len()],
+            qp,
+            linear_in: HashSet::new(),
+            clearance,
+            clearance_in: vec![false; clearance.len()],
+        }
+    }
+
+    /// Add the clearance rows `chosen` (indices into the candidates).
+    fn add_clearance(&mut self, chosen: &[usize]) {
+        for &i in chosen {
+            if !self.clearance_in[i] {
+                self.clearance_in[i] = true;
+                self.qp.inequalities.push(self.clearance[i].row.clone());
+                self.ids.push(RowId::Clearance(i));
+            }
+        }
+    }
+
+    /// (index, violation) of the candidate clearance rows outside the QP
+    /// that `z` breaks.
+    fn violated_clearance(&self, z: &DVector<f64>) -> Vec<(usize, f64)> {
+        (0..self.clearance.len())
+            .filter(|&i| !self.clearance_in[i])
+            .map(|i| (i, self.clearance[i].violation(z)))
+            .filter(|&(_, v)| v > GENERATION_TOLERANCE)
+            .collect()
+    }
+
+    /// Slack at the iterate of the candidate clearance rows outside the QP.
+    fn left_out_shortfall(&self) -> f64 {
+        (0..self.clearance.len())
+            .filter(|&i| !self.clearance_in[i])
+            .map(|i| self.clearance[i].shortfall)
+            .sum()
+    }
+
+    /// The rows active at `sol` (positive multiplier).
+    fn active_rows(&self, sol: &QpSolution) -> ActiveRows {
+        let largest = sol
+            .inequality_duals
+            .iter()
+            .fold(0.0f64, |m, &d| m.max(d.abs()));
+        let threshold = ACTIVE_DUAL_FRACTION * largest.max(1e-12);
+        let mut out = ActiveRows::default();
+        for (k, id) in self.ids.iter().enumerate() {
+            let active = sol.inequality_duals[k] > threshold;
+            match (*id, active) {
+                (RowId::Linear(r), true) => out.linear.push(r),
+                (RowId::Clearance(i), true) => {
+                    out.clearance.insert(self.clearance[i].id());
+                }
+                _ => {}
+            }
+        }
+        out
+    }
+}
+
+/// The violated rows `violated` (index, violation) thinned in time, as
+/// indices into `clearance`.
+fn thin_violated(clearance: &[ClearanceRow], violated: &[(usize, f64)]) -> Vec<usize> {
+    let candidates: Vec<Candidate<(usize, usize)>> = violated
+        .iter()
+        .map(|&(i, v)| Candidate {
+            key: clearance[i].key,
+            phase: clearance[i].phase,
+            score: v,
+            in_band: true,
+        })
+        .collect();
+    thin_in_time(&candidates)
+        .into_iter()
+        .map(|k| violated[k].0)
+        .collect()
+}
+
+/// What one QP inequality is.
+#[derive(Clone, Copy, Debug)]
+enum RowId {
+    /// A limit or velocity row.
+    Linear(RowRef),
+    /// Index into the subproblem's clearance rows.
+    Clearance(usize),
+    /// An opt-in weight bound.
+    Other,
+}
+
+/// Rows active at a QP solution (positive multiplier): the start
+/// of the next QP's working set.
+#[derive(Clone, Debug, Default)]
+pub(super) struct ActiveRows {
+    linear: Vec<RowRef>,
+    /// (phase index, robot shape, obstacle).
+    clearance: HashSet<(usize, usize, usize)>,
+}
+
+/// Multipliers below this fraction of the largest one count as inactive.
+const ACTIVE_DUAL_FRACTION: f64 = 1e-6;
+
+/// Where a subproblem is linearised.
+#[derive(Clone, Copy)]
+pub(super) struct Linearisation<'a> {
+    /// Generate clearance rows until none is violated (else
+    /// [`WORKING_SET_ROUNDS`] rounds).
+    pub(super) exact: bool,
+    pub(super) rows: &'a PhaseRows,
+    pub(super) eval: &'a GridEval,
+    pub(super) centre: &'a DVector<f64>,
+    pub(super) rho: f64,
+    pub(super) trust: Option<f64>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::optim::example::{typical_request, ExampleSettings};
+    use crate::optim::linear::LinearSet;
+
+    /// The QP of every candidate row, built without the working set.
+    fn full_qp(p: &Problem, at: &Linearisation) -> Qp {
+        let target = p.clearance_m + CLEARANCE_BUFFER_M;
+        let mut qp = Qp::new(p.whitening.dim());
+        qp.center = at.centre.clone();
+        qp.equalities = p.linear.equalities(&p.ends, &p.prior.mean);
+        qp.inequalities = LinearSet::all_rows(at.rows)
+            .map(|r| p.linear.inequality(at.rows, &p.prior.mean, r))
+            .collect();
+        qp.inequalities.extend(
+            p.clearance_rows(at.rows, at.eval, target, at.rho)
+                .into_iter()
+                .map(|c| c.row),
+        );
+        if let Some((cone, _)) = p.goal_cone(at.eval, at.rho) {
+            qp.cones.push(cone);
+        }
+        qp.trust = at.trust.map(|r| (at.eval.z.clone(), r));
+        qp
+    }
+
+    #[test]
+    fn exact_constraint_generation_solves_the_full_qp() {
+        let robot = crate::robot::Robot::panda().unwrap();
+        for seed in [0, 4] {
+            let p = typical_request(&robot, seed, &ExampleSettings::default())
+                .unwrap()
+                .validate(&robot)
+                .unwrap();
+            let centre = DVector::zeros(p.whitening.dim());
+            // Linearise at a point off the prior mean (inside the limits).
+            let z0 = DVector::from_fn(p.whitening.dim(), |i, _| 0.05 * ((i % 5) as f64 - 2.0));
+            let eval = p.evaluate_grid(&p.grid, z0, &centre);
+            assert!(!eval.pairs.is_empty(), "seed {seed}: no clearance pair");
+            let at = Linearisation {
+                exact: true,
+                rows: &p.grid,
+                eval: &eval,
+                centre: &centre,
+                rho: 1e3,
+                trust: Some(2.0),
+            };
+            let mut stats = SolveStats::default();
+            let (sol, _, _) = p
+                .subproblem(
+                    &at,
+                    &ActiveRows::default(),
+                    &SolveControl::default(),
+                    &mut stats,
+                )
+                .unwrap();
+            let full = full_qp(&p, &at).solve(&QpSettings::default()).unwrap();
+            assert!(
+                stats.max_qp_rows < full.rows / 4,
+                "seed {seed}: working set {} rows of {}",
+                stats.max_qp_rows,
+                full.rows
+            );
+            // Clarabel stops at a 1e-8 duality gap; with the strongly convex
+            // |z|² that bounds |z - z*| by about sqrt(1e-8 x objective).
+            let gap = (&sol.z - &full.z).amax();
+            assert!(gap < 1e-4, "seed {seed}: |z - z_full| = {gap:e}");
+            // Rows left out may each be broken by up to GENERATION_TOLERANCE
+            // without their slack: at most ρ·1e-8 per row in the objective.
+            let rel = (sol.objective - full.objective).abs() / (1.0 + full.objective.abs());
+            assert!(
+                rel < 1e-6,
+                "seed {seed}: objective {} vs {}",
+                sol.objective,
+                full.objective
+            );
+        }
+    }
+}
