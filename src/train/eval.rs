@@ -6,6 +6,10 @@
 //!   `min(|q - q'|, |q + q'|)` (Eq. 9) between the predicted and the
 //!   ground-truth distribution, for the mean trajectory and for the
 //!   trajectories 3 sigma above and below it (joint space);
+//! - beside Table III, the mean trajectory's final-point error per
+//!   base-frame axis next to the ground truth's spread on that axis: a model
+//!   that learned nothing about an axis (e.g. depth, which a single image
+//!   hardly shows) scores about that axis's spread;
 //! - Table II: the Davies–Bouldin index of a 2-D embedding of the latent
 //!   vectors labelled by plant configuration, with a scatter plot.
 //!
@@ -20,7 +24,7 @@ use crate::net::predict::predictions_from_outputs;
 use crate::net::{candle_error, Model};
 use crate::promp::{Basis, WeightDistribution};
 use crate::{Error, Result};
-use nalgebra::{Isometry3, UnitQuaternion};
+use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 use serde::Serialize;
 use std::path::Path;
 
@@ -64,6 +68,36 @@ pub struct FinalPointTable {
     pub minus_3sigma: FinalPointError,
 }
 
+/// The mean trajectory's final TCP position error per base-frame axis.
+#[derive(Clone, Copy, Debug, Default, Serialize, PartialEq)]
+pub struct AxisErrors {
+    /// Mean absolute error on x, y and z (m).
+    pub model_mae_m: [f64; 3],
+    /// Mean absolute deviation of the ground-truth final positions from
+    /// their mean on x, y and z (m): the error of a model that predicts the
+    /// split's mean position on that axis.
+    pub truth_spread_m: [f64; 3],
+}
+
+/// [`AxisErrors`] of (predicted, ground-truth) final positions.
+pub fn axis_errors(pairs: &[(Vector3<f64>, Vector3<f64>)]) -> AxisErrors {
+    let mut out = AxisErrors::default();
+    if pairs.is_empty() {
+        return out;
+    }
+    let n = pairs.len() as f64;
+    let truth_mean = pairs.iter().map(|(_, t)| t).sum::<Vector3<f64>>() / n;
+    for k in 0..3 {
+        out.model_mae_m[k] = pairs.iter().map(|(p, t)| (p[k] - t[k]).abs()).sum::<f64>() / n;
+        out.truth_spread_m[k] = pairs
+            .iter()
+            .map(|(_, t)| (t[k] - truth_mean[k]).abs())
+            .sum::<f64>()
+            / n;
+    }
+    out
+}
+
 /// Table II: latent-space clustering.
 #[derive(Clone, Debug, Serialize)]
 pub struct LatentTable {
@@ -101,6 +135,8 @@ pub struct EvalReport {
     pub table2: LatentTable,
     /// Table III.
     pub table3: FinalPointTable,
+    /// Table III's mean-trajectory position error per base-frame axis.
+    pub final_position_by_axis: AxisErrors,
 }
 
 /// Evaluate a model on samples; returns the report and the embedding.
@@ -123,6 +159,7 @@ pub fn evaluate(
     let mut sums = vec![(0.0, 0.0); config.n_joints];
     let mut latents = Vec::with_capacity(samples.len());
     let mut finals = Vec::with_capacity(samples.len());
+    let mut final_positions = Vec::with_capacity(samples.len());
     let indices: Vec<usize> = (0..samples.len()).collect();
     for chunk in indices.chunks(16) {
         let prepared: Vec<_> = chunk.iter().map(|&i| samples[i].prepared.clone()).collect();
@@ -139,12 +176,14 @@ pub fn evaluate(
             sums[j].1 += f64::from(c[j]) * chunk.len() as f64;
         }
         for (prediction, &i) in predictions.into_iter().zip(chunk) {
-            finals.push(final_point_errors(
+            let (errors, positions) = final_point_errors(
                 &prediction.distribution,
                 &samples[i].distribution,
                 &basis,
                 fk,
-            ));
+            );
+            finals.push(errors);
+            final_positions.push(positions);
             latents.push(prediction.latent);
         }
     }
@@ -186,23 +225,25 @@ pub fn evaluate(
             clusters: clusters.len(),
         },
         table3,
+        final_position_by_axis: axis_errors(&final_positions),
     };
     Ok((report, embedding))
 }
 
-/// Errors of the mean, +3 sigma and -3 sigma final configurations.
+/// Errors of the mean, +3 sigma and -3 sigma final configurations, and the
+/// (predicted, ground-truth) final TCP positions of the mean.
 fn final_point_errors(
     predicted: &WeightDistribution,
     truth: &WeightDistribution,
     basis: &Basis,
     fk: TcpFk,
-) -> [FinalPointError; 3] {
+) -> ([FinalPointError; 3], (Vector3<f64>, Vector3<f64>)) {
     let (p_mean, p_std) = final_marginal(predicted, basis);
     let (t_mean, t_std) = final_marginal(truth, basis);
     let shifted = |mean: &[f64], std: &[f64], k: f64| -> Vec<f64> {
         mean.iter().zip(std).map(|(m, s)| m + k * s).collect()
     };
-    [0.0, 3.0, -3.0].map(|k| {
+    let errors = [0.0, 3.0, -3.0].map(|k| {
         let a = fk(&shifted(&p_mean, &p_std, k));
         let b = fk(&shifted(&t_mean, &t_std, k));
         let position = (a.translation.vector - b.translation.vector).norm();
@@ -211,7 +252,12 @@ fn final_point_errors(
             orientation: quaternion_distance(&a.rotation, &b.rotation),
             max_position_m: position,
         }
-    })
+    });
+    let positions = (
+        fk(&p_mean).translation.vector,
+        fk(&t_mean).translation.vector,
+    );
+    (errors, positions)
 }
 
 /// Per-joint mean and standard deviation at the final phase sample.
@@ -290,7 +336,53 @@ pub fn to_markdown(report: &EvalReport) -> String {
             e.position_m, e.orientation, e.max_position_m
         );
     }
+    let axes = &report.final_position_by_axis;
+    s += "\n### Mean trajectory's final position by base-frame axis\n\n\
+          A model that learned nothing about an axis scores about the ground truth's spread on it.\n\n\
+          | axis | model MAE (m) | ground-truth spread (m) |\n|---|---|---|\n";
+    for (k, axis) in ["x", "y", "z"].iter().enumerate() {
+        s += &format!(
+            "| {axis} | {:.4} | {:.4} |\n",
+            axes.model_mae_m[k], axes.truth_spread_m[k]
+        );
+    }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn axis_errors_are_zero_for_a_perfect_model_and_the_spread_for_the_mean() {
+        let truth = [
+            Vector3::new(0.60, -0.10, 0.70),
+            Vector3::new(0.64, 0.00, 0.74),
+            Vector3::new(0.70, 0.05, 0.66),
+            Vector3::new(0.66, -0.15, 0.72),
+        ];
+        let perfect: Vec<_> = truth.iter().map(|t| (*t, *t)).collect();
+        let a = axis_errors(&perfect);
+        assert_eq!(a.model_mae_m, [0.0; 3]);
+        // Spread on x: mean 0.65, deviations 0.05, 0.01, 0.05, 0.01.
+        assert!((a.truth_spread_m[0] - 0.03).abs() < 1e-12);
+        let mean = truth.iter().sum::<Vector3<f64>>() / 4.0;
+        let constant: Vec<_> = truth.iter().map(|t| (mean, *t)).collect();
+        let c = axis_errors(&constant);
+        for k in 0..3 {
+            assert!((c.model_mae_m[k] - c.truth_spread_m[k]).abs() < 1e-12);
+            assert!(c.truth_spread_m[k] > 0.0);
+        }
+        // An offset of 1 cm on y only.
+        let shifted: Vec<_> = truth
+            .iter()
+            .map(|t| (t + Vector3::new(0.0, 0.01, 0.0), *t))
+            .collect();
+        let d = axis_errors(&shifted);
+        assert!((d.model_mae_m[1] - 0.01).abs() < 1e-12);
+        assert!(d.model_mae_m[0].abs() < 1e-15 && d.model_mae_m[2].abs() < 1e-15);
+        assert_eq!(axis_errors(&[]), AxisErrors::default());
+    }
 }
 
 /// Write `eval.json`, `eval.md` and `embedding.png` into `dir`.
