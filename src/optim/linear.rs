@@ -68,10 +68,10 @@ impl LinearSet {
     pub fn excess(&self, rows: &PhaseRows, w: &DVector<f64>, r: RowRef) -> f64 {
         let j = r.joint;
         match r.kind {
-            RowKind::PositionUpper => rows.position(r.phase, w)[j] - self.upper[j],
-            RowKind::PositionLower => self.lower[j] - rows.position(r.phase, w)[j],
-            RowKind::VelocityUpper => rows.velocity(r.phase, w)[j] - self.velocity[j],
-            RowKind::VelocityLower => -self.velocity[j] - rows.velocity(r.phase, w)[j],
+            RowKind::PositionUpper => rows.joint_position(r.phase, j, w) - self.upper[j],
+            RowKind::PositionLower => self.lower[j] - rows.joint_position(r.phase, j, w),
+            RowKind::VelocityUpper => rows.joint_velocity(r.phase, j, w) - self.velocity[j],
+            RowKind::VelocityLower => -self.velocity[j] - rows.joint_velocity(r.phase, j, w),
         }
     }
 

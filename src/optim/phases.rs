@@ -141,10 +141,24 @@ impl PhaseRows {
         self.apply(&self.dpsi[p], w)
     }
 
-    fn apply(&self, row: &DVector<f64>, w: &DVector<f64>) -> Vec<f64> {
+    /// Position (rad) of joint `j` at phase index `p` for weights `w`.
+    pub fn joint_position(&self, p: usize, j: usize, w: &DVector<f64>) -> f64 {
+        self.apply_joint(&self.psi[p], j, w)
+    }
+
+    /// Velocity (rad/s) of joint `j` at phase index `p` for weights `w`.
+    pub fn joint_velocity(&self, p: usize, j: usize, w: &DVector<f64>) -> f64 {
+        self.apply_joint(&self.dpsi[p], j, w)
+    }
+
+    fn apply_joint(&self, row: &DVector<f64>, j: usize, w: &DVector<f64>) -> f64 {
         let nb = self.n_basis;
+        row.dot(&w.rows(j * nb, nb))
+    }
+
+    fn apply(&self, row: &DVector<f64>, w: &DVector<f64>) -> Vec<f64> {
         (0..self.n_joints)
-            .map(|j| row.dot(&w.rows(j * nb, nb)))
+            .map(|j| self.apply_joint(row, j, w))
             .collect()
     }
 }
