@@ -349,6 +349,24 @@ pub fn to_markdown(report: &EvalReport) -> String {
     s
 }
 
+/// Write `eval.json`, `eval.md` and `embedding.png` into `dir`.
+pub fn write_outputs(dir: &Path, report: &EvalReport, embedding: &Embedding) -> Result<()> {
+    let json = serde_json::to_string_pretty(report)
+        .map_err(|e| Error::Numerical(format!("cannot serialise report: {e}")))?;
+    write_atomic(&dir.join("eval.json"), json.as_bytes())?;
+    write_atomic(&dir.join("eval.md"), to_markdown(report).as_bytes())?;
+    let title = format!(
+        "{} latent space ({}), DB = {}",
+        report.model,
+        embedding.method.split(' ').next().unwrap_or("embedding"),
+        report
+            .table2
+            .davies_bouldin
+            .map_or("n/a".into(), |v| format!("{v:.3}"))
+    );
+    plot_embedding(embedding, &title, &dir.join("embedding.png"))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -383,22 +401,4 @@ mod tests {
         assert!(d.model_mae_m[0].abs() < 1e-15 && d.model_mae_m[2].abs() < 1e-15);
         assert_eq!(axis_errors(&[]), AxisErrors::default());
     }
-}
-
-/// Write `eval.json`, `eval.md` and `embedding.png` into `dir`.
-pub fn write_outputs(dir: &Path, report: &EvalReport, embedding: &Embedding) -> Result<()> {
-    let json = serde_json::to_string_pretty(report)
-        .map_err(|e| Error::Numerical(format!("cannot serialise report: {e}")))?;
-    write_atomic(&dir.join("eval.json"), json.as_bytes())?;
-    write_atomic(&dir.join("eval.md"), to_markdown(report).as_bytes())?;
-    let title = format!(
-        "{} latent space ({}), DB = {}",
-        report.model,
-        embedding.method.split(' ').next().unwrap_or("embedding"),
-        report
-            .table2
-            .davies_bouldin
-            .map_or("n/a".into(), |v| format!("{v:.3}"))
-    );
-    plot_embedding(embedding, &title, &dir.join("embedding.png"))
 }
