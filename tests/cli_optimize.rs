@@ -2,7 +2,10 @@
 
 use dpmp::optim::example::{typical_request, ExampleSettings};
 use dpmp::robot::Robot;
-use std::process::Command;
+
+mod cli_support;
+
+use cli_support::{arg, dpmp, dpmp_ok, stderr};
 
 fn write_request(
     dir: &std::path::Path,
@@ -26,18 +29,7 @@ fn optimize_prints_the_response_and_draws_the_plot() {
     let dir = tempfile::tempdir().unwrap();
     let req = write_request(dir.path(), |_| {});
     let plot = dir.path().join("joints.png");
-    let out = Command::new(env!("CARGO_BIN_EXE_dpmp"))
-        .args(["optimize", "--request"])
-        .arg(&req)
-        .arg("--plot")
-        .arg(&plot)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = dpmp_ok(&["optimize", "--request", arg(&req), "--plot", arg(&plot)]);
     let resp: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert!(["optimal", "infeasible", "max_iterations"].contains(&resp["status"].as_str().unwrap()));
     assert_eq!(resp["weights"].as_array().unwrap().len(), 56);
@@ -50,30 +42,17 @@ fn optimize_prints_the_response_and_draws_the_plot() {
 fn invalid_input_exits_2_and_names_file_and_field() {
     let dir = tempfile::tempdir().unwrap();
     let req = write_request(dir.path(), |j| j["clearance_m"] = serde_json::json!(-1.0));
-    let out = Command::new(env!("CARGO_BIN_EXE_dpmp"))
-        .args(["optimize", "--request"])
-        .arg(&req)
-        .output()
-        .unwrap();
+    let out = dpmp(&["optimize", "--request", arg(&req)]);
     assert_eq!(out.status.code(), Some(2));
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = stderr(&out);
     assert!(
         err.contains("clearance_m") && err.contains("request.json"),
         "{err}"
     );
     let req = write_request(dir.path(), |j| j["unknown_field"] = serde_json::json!(1));
-    let out = Command::new(env!("CARGO_BIN_EXE_dpmp"))
-        .args(["optimize", "--request"])
-        .arg(&req)
-        .output()
-        .unwrap();
+    let out = dpmp(&["optimize", "--request", arg(&req)]);
     assert_eq!(out.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&out.stderr).contains("unknown_field"));
-    let out = Command::new(env!("CARGO_BIN_EXE_dpmp"))
-        .args(["optimize", "--request"])
-        .arg(&req)
-        .args(["--plot", "x.gif"])
-        .output()
-        .unwrap();
+    assert!(stderr(&out).contains("unknown_field"));
+    let out = dpmp(&["optimize", "--request", arg(&req), "--plot", "x.gif"]);
     assert_eq!(out.status.code(), Some(2));
 }

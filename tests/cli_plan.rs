@@ -7,14 +7,9 @@
 use dpmp::robot::Robot;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
-use std::process::Command;
+mod cli_support;
 
-fn dpmp(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_dpmp"))
-        .args(args)
-        .output()
-        .unwrap()
-}
+use cli_support::dpmp;
 
 fn default_model() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("models/default")

@@ -1,39 +1,20 @@
 //! `dpmp prior` end to end: example -> inspect (json, table) -> plot, and
 //! bad input exits non-zero naming the file and field.
 
-use std::process::Command;
+mod cli_support;
 
-fn dpmp() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_dpmp"))
-}
+use cli_support::{arg, dpmp, dpmp_ok, stderr};
 
 #[test]
 fn example_inspect_and_plot() {
     let dir = tempfile::tempdir().unwrap();
     let ann = dir.path().join("ann");
-    let out = dpmp()
-        .args(["prior", "example", "--out"])
-        .arg(&ann)
-        .args(["--index", "4", "--seed", "2"])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let ann = arg(&ann);
+    dpmp_ok(&[
+        "prior", "example", "--out", ann, "--index", "4", "--seed", "2",
+    ]);
 
-    let out = dpmp()
-        .args(["prior", "inspect", "--annotation"])
-        .arg(&ann)
-        .args(["--index", "4"])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = dpmp_ok(&["prior", "inspect", "--annotation", ann, "--index", "4"]);
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let mean = v["mean"].as_array().unwrap();
     let std = v["std"].as_array().unwrap();
@@ -46,12 +27,16 @@ fn example_inspect_and_plot() {
     assert_eq!(v["repaired"], false);
     assert!(v["min_eigenvalue"].as_f64().unwrap() > -1e-9);
 
-    let out = dpmp()
-        .args(["prior", "inspect", "--format", "table", "--annotation"])
-        .arg(&ann)
-        .args(["--index", "4"])
-        .output()
-        .unwrap();
+    let out = dpmp_ok(&[
+        "prior",
+        "inspect",
+        "--format",
+        "table",
+        "--annotation",
+        ann,
+        "--index",
+        "4",
+    ]);
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(
         text.contains("J7") && text.contains("repaired: no"),
@@ -59,29 +44,23 @@ fn example_inspect_and_plot() {
     );
 
     let png = dir.path().join("prior.png");
-    let out = dpmp()
-        .args(["prior", "plot", "--annotation"])
-        .arg(&ann)
-        .args(["--index", "4", "--out"])
-        .arg(&png)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let plot = |out: &str| {
+        dpmp_ok(&[
+            "prior",
+            "plot",
+            "--annotation",
+            ann,
+            "--index",
+            "4",
+            "--out",
+            out,
+        ])
+    };
+    plot(arg(&png));
     let img = image::open(&png).unwrap();
     assert_eq!((img.width(), img.height()), (1400, 900));
     let svg = dir.path().join("prior.svg");
-    let out = dpmp()
-        .args(["prior", "plot", "--annotation"])
-        .arg(&ann)
-        .args(["--index", "4", "--out"])
-        .arg(&svg)
-        .output()
-        .unwrap();
-    assert!(out.status.success());
+    plot(arg(&svg));
     assert!(std::fs::read_to_string(&svg).unwrap().contains("<svg"));
 }
 
@@ -89,53 +68,39 @@ fn example_inspect_and_plot() {
 fn bad_input_names_file_and_field() {
     let dir = tempfile::tempdir().unwrap();
     let ann = dir.path().join("ann");
-    assert!(dpmp()
-        .args(["prior", "example", "--out"])
-        .arg(&ann)
-        .output()
-        .unwrap()
-        .status
-        .success());
+    dpmp_ok(&["prior", "example", "--out", arg(&ann)]);
+    let inspect = || dpmp(&["prior", "inspect", "--annotation", arg(&ann)]);
+
     std::fs::write(
         ann.join("J2/0.json"),
         r#"{"mean_weights": [1,2,3], "L": []}"#,
     )
     .unwrap();
-    let out = dpmp()
-        .args(["prior", "inspect", "--annotation"])
-        .arg(&ann)
-        .output()
-        .unwrap();
+    let out = inspect();
     assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = stderr(&out);
     assert!(
         err.contains("J2/0.json") && err.contains("mean_weights"),
         "{err}"
     );
 
     std::fs::write(ann.join("J2/0.json"), "not json").unwrap();
-    let out = dpmp()
-        .args(["prior", "inspect", "--annotation"])
-        .arg(&ann)
-        .output()
-        .unwrap();
+    let out = inspect();
     assert!(!out.status.success());
-    assert!(String::from_utf8_lossy(&out.stderr).contains("J2/0.json"));
+    assert!(stderr(&out).contains("J2/0.json"));
 
-    let out = dpmp()
-        .args(["prior", "inspect", "--width", "nan", "--annotation"])
-        .arg(&ann)
-        .output()
-        .unwrap();
+    let out = dpmp(&[
+        "prior",
+        "inspect",
+        "--width",
+        "nan",
+        "--annotation",
+        arg(&ann),
+    ]);
     assert_eq!(out.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&out.stderr).contains("--width"));
+    assert!(stderr(&out).contains("--width"));
 
-    let out = dpmp()
-        .args(["prior", "plot", "--annotation"])
-        .arg(&ann)
-        .args(["--out", "x.gif"])
-        .output()
-        .unwrap();
+    let out = dpmp(&["prior", "plot", "--annotation", arg(&ann), "--out", "x.gif"]);
     assert_eq!(out.status.code(), Some(2));
     assert!(!std::path::Path::new("x.gif").exists());
 }

@@ -4,14 +4,9 @@
 
 mod net_common;
 
-use std::process::Command;
+mod cli_support;
 
-fn dpmp(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_dpmp"))
-        .args(args)
-        .output()
-        .unwrap()
-}
+use cli_support::dpmp;
 
 #[test]
 fn train_then_eval_through_the_cli() {

@@ -2,7 +2,7 @@
 //! collision primitives of the robot model, printed as JSON.
 
 use crate::robot::{IkOptions, IkTarget, Robot};
-use crate::scene::Scene;
+use crate::scene::{Clearance, Scene};
 use crate::{Error, Result};
 use nalgebra::{Point3, Unit, Vector3};
 use serde_json::{json, Map, Value};
@@ -170,10 +170,29 @@ fn clearance_json(args: &ClearanceArgs) -> Result<Value> {
         if !activation.is_finite() {
             return Err(Error::invalid("--activation", "must be a finite number"));
         }
-        out["within"] = serde_json::to_value(scene.clearances_within(&robot, &frames, activation))
-            .map_err(|e| Error::Numerical(e.to_string()))?;
+        let within = scene.clearances_within(&robot, &frames, activation);
+        out["within"] = within
+            .iter()
+            .map(|c| named_clearance(c, &robot, &scene))
+            .collect();
     }
     Ok(out)
+}
+
+/// One pair of `robot clearance --activation` with the link and obstacle
+/// names beside their indices.
+fn named_clearance(c: &Clearance, robot: &Robot, scene: &Scene) -> Value {
+    json!({
+        "distance": c.distance,
+        "shape": c.shape,
+        "link": c.link,
+        "link_name": c.link_name(robot),
+        "obstacle": c.obstacle,
+        "obstacle_id": c.obstacle_id(scene),
+        "point_robot": c.point_robot,
+        "point_obstacle": c.point_obstacle,
+        "normal": c.normal,
+    })
 }
 
 fn ik_json(args: &IkArgs) -> Result<Value> {
