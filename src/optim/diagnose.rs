@@ -48,10 +48,8 @@ impl Problem {
         let c = self.scene.min_clearance(&self.robot, &frames)?;
         (c.distance < self.clearance_m - FEASIBILITY_TOLERANCE).then(|| {
             format!(
-                "start is in collision: link {} is {:.4} m from obstacle '{}' (clearance_m {:.4})",
-                c.link_name(&self.robot),
-                c.distance,
-                c.obstacle_id(&self.scene),
+                "start is in collision: {} (clearance_m {:.4})",
+                c.describe(&self.robot, &self.scene),
                 self.clearance_m
             )
         })

@@ -144,11 +144,8 @@ impl Problem {
                     worst = Some((
                         excess,
                         format!(
-                            "clearance_m: link {} is {:.4} m from obstacle '{}' at t = {:.2} s (required {:.4} m)",
-                            c.link_name(&self.robot),
-                            c.distance,
-                            c.obstacle_id(&self.scene),
-                            t,
+                            "clearance_m: {} at t = {t:.2} s (required {:.4} m)",
+                            c.describe(&self.robot, &self.scene),
                             self.clearance_m
                         ),
                     ));

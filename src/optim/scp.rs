@@ -69,6 +69,8 @@ const LINE_SEARCH_HALVINGS: usize = 2;
 /// One QP step to judge: from `eval` towards `target` (whitened).
 struct StepTrial<'a> {
     eval: &'a GridEval,
+    /// `eval`'s merit at penalty `rho`.
+    merit: f64,
     target: &'a DVector<f64>,
     rows: &'a PhaseRows,
     centre: &'a DVector<f64>,
@@ -241,7 +243,7 @@ impl Problem {
                     self.options.max_iterations,
                     self.worst_constraint(&eval)
                 );
-                return Ok(self.unverified(Status::MaxIterations, &eval, reason, stats, started));
+                return Ok(self.gave_up(&eval, reason, stats, started));
             }
             let at = Linearisation {
                 exact,
@@ -269,13 +271,7 @@ impl Problem {
                 }
                 Err(QpFailure::Numerical(what)) => {
                     let reason = format!("QP solver failed ({what}); best iterate returned");
-                    return Ok(self.unverified(
-                        Status::MaxIterations,
-                        &eval,
-                        reason,
-                        stats,
-                        started,
-                    ));
+                    return Ok(self.gave_up(&eval, reason, stats, started));
                 }
             };
             stats.iterations += 1;
@@ -284,6 +280,7 @@ impl Problem {
             let scale = 1.0 + merit_here.abs();
             let trial = StepTrial {
                 eval: &eval,
+                merit: merit_here,
                 target: &sol.z,
                 rows: &rows,
                 centre,
@@ -346,13 +343,7 @@ impl Problem {
                         "no feasible solution found: {} could not be reduced further at the largest penalty (a local minimum of the violation; the problem may be infeasible)",
                         self.worst_constraint(&eval)
                     );
-                    return Ok(self.unverified(
-                        Status::MaxIterations,
-                        &eval,
-                        reason,
-                        stats,
-                        started,
-                    ));
+                    return Ok(self.gave_up(&eval, reason, stats, started));
                 }
             }
         }
@@ -372,13 +363,13 @@ impl Problem {
     ) -> (Option<(GridEval, f64, f64)>, f64) {
         let StepTrial {
             eval,
+            merit: merit_here,
             target,
             rows,
             centre,
             rho,
             predicted,
         } = *trial;
-        let merit_here = eval.merit(rho);
         let scale = 1.0 + merit_here.abs();
         // Halving keeps the hard (linear) rows only from a point satisfying them.
         let halvings = if eval.linear_ok {
@@ -426,6 +417,18 @@ impl Problem {
         started: Instant,
     ) -> Solution {
         self.finish(status, eval, None, Some(reason), stats, started, &[])
+    }
+
+    /// Finish as `max_iterations` without a converged feasible iterate,
+    /// for `reason`.
+    fn gave_up(
+        &self,
+        eval: &GridEval,
+        reason: String,
+        stats: SolveStats,
+        started: Instant,
+    ) -> Solution {
+        self.unverified(Status::MaxIterations, eval, reason, stats, started)
     }
 
     /// Finish as `max_iterations` because the caller stopped the solver;

@@ -48,6 +48,16 @@ impl Clearance {
     pub fn obstacle_id<'s>(&self, scene: &'s Scene) -> &'s str {
         &scene.obstacles()[self.obstacle].id
     }
+
+    /// `link L is D m from obstacle 'O'`, for messages.
+    pub fn describe(&self, robot: &Robot, scene: &Scene) -> String {
+        format!(
+            "link {} is {:.4} m from obstacle '{}'",
+            self.link_name(robot),
+            self.distance,
+            self.obstacle_id(scene)
+        )
+    }
 }
 
 /// A robot primitive placed by forward kinematics.
