@@ -240,10 +240,11 @@ impl Qp {
         if let Some((centre, radius)) = &self.trust {
             // b - A x = (radius, z - centre).
             cols.row(&empty, &[], *radius);
+            let mut e = DVector::zeros(n_z);
             for c in 0..n_z {
-                let mut e = DVector::zeros(n_z);
                 e[c] = -1.0;
                 cols.row(&e, &[], -centre[c]);
+                e[c] = 0.0;
             }
             cones.push(SupportedConeT::SecondOrderConeT(1 + n_z));
         }
