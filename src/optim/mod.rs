@@ -9,6 +9,7 @@
 //! - [`phases`] — joint positions / velocities as rows in `z` per phase.
 //! - [`linear`] — limit, velocity, equality and opt-in weight-bound rows.
 //! - [`qp`] — one QP in Clarabel (CSC built directly).
+//! - [`nullspace`] — equality rows eliminated before Clarabel sees a QP.
 //! - [`scp`] — the trust-region SCP driver, [`SolveControl`], [`Solution`].
 //! - `evaluate` — one iterate on the optimisation phases: clearances, goal, merit.
 //! - `subproblem` — one QP: linearisation, working set, constraint generation.
@@ -25,6 +26,7 @@ pub mod diagnose;
 mod evaluate;
 pub mod example;
 pub mod linear;
+pub mod nullspace;
 pub mod phases;
 pub mod problem;
 pub mod qp;

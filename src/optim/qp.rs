@@ -3,13 +3,16 @@
 //! Variables `x = [z, s]`: the whitened weights and one non-negative slack
 //! per soft row. Objective `|z - c|² + Σ ρ_i s_i` (c = 0 when solving
 //! towards the prior mean, the whitened draw when projecting a sample).
-//! Rows: equalities (zero cone), hard and soft (slacked) inequalities
+//! Rows: equalities `a·z = b`, hard and soft (slacked) inequalities
 //! `a·z ≤ b (+ s)`, second-order cones `|g0 + G z| ≤ r (+ s)` (the goal),
 //! and an optional trust-region ball `|z - z_k|₂ ≤ Δ` (a second-order cone:
 //! in whitened coordinates that is a Mahalanobis ball, and it costs one cone
-//! instead of 2 x dim rows). The constraint
-//! matrix is built column by column straight into Clarabel's CSC format.
+//! instead of 2 x dim rows). The equalities never reach Clarabel: they are
+//! eliminated by a [`NullSpace`] basis, which keeps the cost and the trust
+//! ball isotropic and makes every dense row shorter. The constraint matrix
+//! is built column by column straight into Clarabel's CSC format.
 
+use super::nullspace::NullSpace;
 use crate::Error;
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
@@ -86,13 +89,12 @@ pub struct QpSolution {
     pub cone_slacks: Vec<f64>,
     /// Objective value `|z - c|² + Σ ρ s`.
     pub objective: f64,
-    /// Multipliers of the equalities (Clarabel's sign convention).
-    pub equality_duals: Vec<f64>,
     /// Multipliers of the inequalities (>= 0).
     pub inequality_duals: Vec<f64>,
-    /// Number of rows of the constraint matrix.
+    /// Number of rows of the constraint matrix Clarabel solved (equalities
+    /// eliminated).
     pub rows: usize,
-    /// Number of variables.
+    /// Number of variables Clarabel solved (equalities eliminated).
     pub variables: usize,
     /// Interior-point iterations Clarabel took.
     pub ipm_iterations: u32,
@@ -173,8 +175,72 @@ impl Qp {
         self.center.len()
     }
 
-    /// Solve with Clarabel.
+    /// Solve with Clarabel. Equalities are eliminated first (see
+    /// [`NullSpace`]): Clarabel sees the problem in the null-space
+    /// coordinates, and the solution is mapped back.
     pub fn solve(&self, settings: &QpSettings) -> std::result::Result<QpSolution, QpFailure> {
+        if self.equalities.is_empty() {
+            return self.solve_without_equalities(settings);
+        }
+        let space = NullSpace::new(&self.equalities, self.dim()).ok_or(QpFailure::Infeasible)?;
+        let mut sol = self
+            .restricted_to(&space)?
+            .solve_without_equalities(settings)?;
+        sol.z = space.lift(&sol.z);
+        sol.objective += space.distance_squared(&self.center);
+        Ok(sol)
+    }
+
+    /// This problem over `z = z_p + N y` (variables `y`), without its
+    /// equalities; infeasible when the trust ball misses the affine set.
+    fn restricted_to(&self, space: &NullSpace) -> std::result::Result<Qp, QpFailure> {
+        let inequalities = self
+            .inequalities
+            .iter()
+            .map(|ineq| {
+                let (a, offset) = space.row(&ineq.a);
+                Inequality {
+                    a,
+                    b: ineq.b - offset,
+                    penalty: ineq.penalty,
+                }
+            })
+            .collect();
+        let cones = self
+            .cones
+            .iter()
+            .map(|cone| Cone {
+                offset: &cone.offset + &cone.matrix * &space.particular,
+                matrix: &cone.matrix * &space.basis,
+                radius: cone.radius,
+                penalty: cone.penalty,
+            })
+            .collect();
+        let trust = match &self.trust {
+            None => None,
+            Some((centre, radius)) => {
+                let left = radius * radius - space.distance_squared(centre);
+                if left <= 0.0 {
+                    return Err(QpFailure::Infeasible);
+                }
+                Some((space.coordinates(centre), left.sqrt()))
+            }
+        };
+        Ok(Qp {
+            center: space.coordinates(&self.center),
+            equalities: Vec::new(),
+            inequalities,
+            cones,
+            trust,
+        })
+    }
+
+    /// Solve a problem without equalities with Clarabel.
+    fn solve_without_equalities(
+        &self,
+        settings: &QpSettings,
+    ) -> std::result::Result<QpSolution, QpFailure> {
+        debug_assert!(self.equalities.is_empty());
         let n_z = self.dim();
         let soft: Vec<usize> = (0..self.inequalities.len())
             .filter(|&i| self.inequalities[i].penalty.is_some())
@@ -206,12 +272,6 @@ impl Qp {
             b: Vec::new(),
         };
         let mut cones = Vec::new();
-        for (a, b) in &self.equalities {
-            cols.row(a, &[], *b);
-        }
-        if !self.equalities.is_empty() {
-            cones.push(SupportedConeT::ZeroConeT(self.equalities.len()));
-        }
         let mut n_nonneg = 0;
         for (i, ineq) in self.inequalities.iter().enumerate() {
             match slack_of[i] {
@@ -282,7 +342,6 @@ impl Qp {
         let cone_slacks = (0..self.cones.len())
             .map(|k| x[cone_slack(k)].max(0.0))
             .collect();
-        let n_eq = self.equalities.len();
         let objective =
             (&z - &self.center).norm_squared() + (n_z..n).map(|i| q[i] * x[i]).sum::<f64>();
         Ok(QpSolution {
@@ -290,8 +349,7 @@ impl Qp {
             inequality_slacks,
             cone_slacks,
             objective,
-            equality_duals: sol.z[..n_eq].to_vec(),
-            inequality_duals: sol.z[n_eq..n_eq + self.inequalities.len()].to_vec(),
+            inequality_duals: sol.z[..self.inequalities.len()].to_vec(),
             rows: m,
             variables: n,
             ipm_iterations: solver.info.iterations,

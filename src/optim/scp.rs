@@ -303,11 +303,14 @@ impl Problem {
             );
             let step = alpha * full_step;
             if let Some((next, predicted, actual)) = accepted {
+                // A step that barely moves the merit is a stall whether
+                // or not the iterate is feasible: an infeasible crawl (e.g.
+                // along a kink of the distance) goes on to exact generation
+                // and a larger penalty instead of spending the iteration cap.
                 let tiny = step <= 1e-6 * (1.0 + next.z.amax())
                     || predicted <= 1e-7 * scale
-                    || (next.feasible()
-                        && (actual.abs() <= 1e-6 * scale
-                            || predicted <= OPTIMALITY_TOLERANCE * scale));
+                    || actual.abs() <= 1e-6 * scale
+                    || (next.feasible() && predicted <= OPTIMALITY_TOLERANCE * scale);
                 if alpha < 1.0 {
                     radius = (0.25 * radius).min(0.5 * full_step);
                 } else if eval.linear_ok && actual >= 0.75 * predicted && step >= 0.9 * radius {
