@@ -100,7 +100,7 @@ fn sweep(robot: &Robot, requests: &[OptimizeRequest]) {
         percentile(&total_ms, 0.99)
     );
     println!(
-        "  iterations median {} p99 {} max {}; largest QP rows median {} p99 {} max {} (variables = 56 + slacks)",
+        "  iterations median {} p99 {} max {}; largest QP rows median {} p99 {} max {} (Clarabel variables: the 56 weights less one per start equality, plus slacks)",
         percentile(&iterations, 0.5),
         percentile(&iterations, 0.99),
         iterations[n - 1],
