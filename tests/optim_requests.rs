@@ -298,3 +298,35 @@ fn a_cancelled_solve_stops_with_max_iterations_and_a_warning() {
         assert!(resp.report.warnings.iter().any(|w| w.contains("deadline")));
     }
 }
+
+#[test]
+fn a_local_minimum_from_the_prior_mean_is_escaped_by_a_seeded_restart() {
+    // Typical problem 3: the run from the prior mean settles on the wrong
+    // side of the cluster (the TCP ends ~7 cm from the goal at the largest
+    // penalty), but the problem is feasible.
+    let (robot, mut req) = request(3, 10);
+    req.options.restarts = 0;
+    let stuck = optimize(&req, &robot).unwrap();
+    assert_eq!(stuck.status, Status::MaxIterations);
+    req.options.restarts = 4;
+    let found = optimize(&req, &robot).unwrap();
+    assert_eq!(found.status, Status::Optimal);
+    let problem = req.validate(&robot).unwrap();
+    assert!(problem.is_feasible(&problem.evaluate(&found.weights)));
+    let clearance = found.report.min_clearance_m.unwrap();
+    assert!(clearance >= req.clearance_m - 1e-9, "{clearance}");
+    let goal = req.goal.as_ref().unwrap();
+    assert!(found.report.goal_error_m.unwrap() <= goal.tolerance_m + 1e-9);
+    // The report counts the work of every run and says what happened.
+    assert!(found.report.iterations > stuck.report.iterations);
+    assert!(found
+        .report
+        .warnings
+        .iter()
+        .any(|w| w.contains("restart") && w.contains("local optimum")));
+    // The draws are seeded: the same request gives the same bytes.
+    let again = optimize(&req, &robot).unwrap();
+    assert_eq!(found.deterministic_json(), again.deterministic_json());
+    req.options.restarts = 33;
+    assert_eq!(field_of(&req, &robot), "options.restarts");
+}

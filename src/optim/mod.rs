@@ -11,6 +11,7 @@
 //! - [`qp`] — one QP in Clarabel (CSC built directly).
 //! - [`nullspace`] — equality rows eliminated before Clarabel sees a QP.
 //! - [`scp`] — the trust-region SCP driver, [`SolveControl`], [`Solution`].
+//! - [`restart`] — restarts from seeded prior draws after a local minimum.
 //! - `evaluate` — one iterate on the optimisation phases: clearances, goal, merit.
 //! - `subproblem` — one QP: linearisation, working set, constraint generation.
 //! - [`verify`] — dense verification and the trajectory output.
@@ -32,6 +33,7 @@ pub mod problem;
 pub mod qp;
 pub mod report;
 pub mod request;
+pub mod restart;
 pub mod sampling;
 pub mod scp;
 mod subproblem;

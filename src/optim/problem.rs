@@ -7,6 +7,7 @@ use super::request::{
     Goal, OptimizeRequest, PriorSpec, SolverOptions, MAX_DURATION_S, MAX_EXTRA_SAMPLES,
     MAX_OBSTACLES, MAX_PHASE_SAMPLES,
 };
+use super::restart::MAX_RESTARTS;
 use super::whiten::Whitening;
 use crate::promp::annotation::{prior_from_joints, REPAIR_FLOOR_RELATIVE};
 use crate::promp::{repair_covariance, Basis, WeightDistribution};
@@ -164,6 +165,12 @@ fn validate_options(o: &SolverOptions, clearance: f64, robot: &Robot) -> Result<
         return Err(Error::invalid(
             "options.max_iterations",
             format!("must be in 1..=1000, got {}", o.max_iterations),
+        ));
+    }
+    if o.restarts > MAX_RESTARTS {
+        return Err(Error::invalid(
+            "options.restarts",
+            format!("must be in 0..={MAX_RESTARTS}, got {}", o.restarts),
         ));
     }
     if !(4..=32).contains(&o.verify_factor) {

@@ -102,8 +102,11 @@ pub struct SolverOptions {
     pub activation_distance_m: Option<f64>,
     /// Dense verification samples per optimisation sample (>= 4).
     pub verify_factor: usize,
-    /// Seed of the prior draws for `samples`.
+    /// Seed of the prior draws for `samples` and for `restarts`.
     pub seed: u64,
+    /// Restarts from seeded prior draws when the run from the prior mean
+    /// ends without a feasible solution (0..=32; 0 disables them).
+    pub restarts: usize,
     /// Opt-in: also bound every weight by its joint's limits (guarantees
     /// the limits at every phase, but real priors' weights lie far outside
     /// the limits, so this usually makes them infeasible).
@@ -127,6 +130,7 @@ impl Default for SolverOptions {
             activation_distance_m: None,
             verify_factor: 4,
             seed: 0,
+            restarts: 4,
             bound_weights: false,
             trust_region: 1.0,
             penalty: 1e3,

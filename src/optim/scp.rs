@@ -135,6 +135,8 @@ pub struct SolveStats {
     pub evaluation_ms: f64,
     /// Wall time in dense verification (ms).
     pub verification_ms: f64,
+    /// Restarts from prior draws that ran (see [`restart`](super::restart)).
+    pub restarts: usize,
 }
 
 impl SolveStats {
@@ -144,6 +146,22 @@ impl SolveStats {
         self.ipm_iterations += sol.ipm_iterations as usize;
         self.max_qp_rows = self.max_qp_rows.max(sol.rows);
         self.max_qp_variables = self.max_qp_variables.max(sol.variables);
+    }
+
+    /// Add the counters of a later run of the same solve (a restart).
+    pub(super) fn absorb(&mut self, later: &SolveStats) {
+        self.iterations += later.iterations;
+        self.qp_solves += later.qp_solves;
+        self.ipm_iterations += later.ipm_iterations;
+        self.rejected_steps += later.rejected_steps;
+        self.max_qp_rows = self.max_qp_rows.max(later.max_qp_rows);
+        self.max_qp_variables = self.max_qp_variables.max(later.max_qp_variables);
+        self.added_phases += later.added_phases;
+        self.final_penalty = later.final_penalty;
+        self.qp_ms += later.qp_ms;
+        self.evaluation_ms += later.evaluation_ms;
+        self.verification_ms += later.verification_ms;
+        self.restarts += later.restarts;
     }
 }
 
@@ -174,9 +192,12 @@ pub struct Solution {
 
 impl Problem {
     /// SCP towards the prior mean (the Mahalanobis-closest feasible weights).
+    /// When that run ends without a feasible answer, it is restarted from
+    /// seeded prior draws (see [`restart`](super::restart)).
     pub fn solve(&self, ctl: &SolveControl) -> Result<Solution> {
         let zero = DVector::zeros(self.whitening.dim());
-        self.run(&zero, ctl)
+        let first = self.run(&zero, &zero, self.options.max_iterations, ctl)?;
+        self.restart_if_stuck(first, ctl)
     }
 
     /// Mahalanobis-closest feasible weights to `target` (under `Σ + λI`).
@@ -184,19 +205,29 @@ impl Problem {
         crate::error::ensure_len("target", target, self.prior.dim())?;
         crate::error::ensure_finite("target", target)?;
         let centre = self.whitening.whiten(&DVector::from_column_slice(target));
-        self.run(&centre, ctl)
+        self.run(&centre, &centre, self.options.max_iterations, ctl)
     }
 
-    fn run(&self, centre: &DVector<f64>, ctl: &SolveControl) -> Result<Solution> {
+    /// One SCP run from `start` towards `centre`, of at most
+    /// `max_iterations` QP iterations.
+    pub(super) fn run(
+        &self,
+        start: &DVector<f64>,
+        centre: &DVector<f64>,
+        max_iterations: usize,
+        ctl: &SolveControl,
+    ) -> Result<Solution> {
         let started = Instant::now();
         let mut rows = self.grid.clone();
         let mut stats = SolveStats::default();
         let mut rho = self.options.penalty;
         let mut radius = self.options.trust_region;
         let mut eval = timed(&mut stats.evaluation_ms, || {
-            self.evaluate_grid(&rows, centre.clone(), centre)
+            self.evaluate_grid(&rows, start.clone(), centre)
         });
-        let mut converged = true;
+        // A feasible centre is its own answer (0 QPs); a feasible start
+        // elsewhere still has to move towards the centre.
+        let mut converged = start == centre;
         let mut hint = ActiveRows::default();
         let mut exact = false;
         loop {
@@ -237,10 +268,10 @@ impl Problem {
                 let warn = format!("solver stopped early: {why}");
                 return Ok(self.stopped_early(&eval, warn, stats, started));
             }
-            if stats.iterations >= self.options.max_iterations {
+            if stats.iterations >= max_iterations {
                 let reason = format!(
                     "no converged feasible solution within {} iterations ({})",
-                    self.options.max_iterations,
+                    max_iterations,
                     self.worst_constraint(&eval)
                 );
                 return Ok(self.gave_up(&eval, reason, stats, started));

@@ -1,0 +1,155 @@
+//! Restarts of the SCP from seeded prior draws when the run from the prior
+//! mean ends without a feasible solution.
+//!
+//! Clearance makes the problem non-convex. The run from the prior mean
+//! decides early on which side of each obstacle the trajectory passes, and
+//! when it picks a side that leads nowhere it ends in a local minimum of the
+//! violation (`max_iterations`: the penalty reached its cap, or the
+//! iteration limit). On the typical problems (`optim::example`) most such
+//! problems are feasible: a run started elsewhere finds a feasible answer.
+//! So [`Problem::solve`] restarts up to `options.restarts` times, each run
+//! from a draw `z ~ N(0, I)` of the whitened prior (seeded by
+//! `options.seed`, so the answer stays deterministic), still minimising the
+//! distance to the prior mean, and returns the first `optimal` one. That
+//! answer is a local optimum found from a draw: a warning says so.
+//!
+//! A restart may take at most [`RESTART_MAX_ITERATIONS`] iterations (the
+//! successful restarts on the typical problems mostly need 7-35), so that a
+//! problem with no feasible answer costs a bounded multiple of one run.
+//! Nothing restarts after a proof of infeasibility, after an `optimal`
+//! answer, or once the deadline or the cancel flag has stopped the solve.
+
+use super::problem::Problem;
+use super::report::Status;
+use super::scp::{Solution, SolveControl, SolveStats};
+use crate::Result;
+use nalgebra::DVector;
+use rand::SeedableRng;
+use rand_distr::{Distribution, StandardNormal};
+
+/// Largest accepted `options.restarts`.
+pub const MAX_RESTARTS: usize = 32;
+/// Iteration limit of one restart (less when `options.max_iterations` is).
+pub const RESTART_MAX_ITERATIONS: usize = 40;
+/// Mixed into `options.seed` so that the restart draws are not the
+/// `samples` draws.
+const RESTART_STREAM: u64 = 0x7e57_a275;
+
+impl Problem {
+    /// `first` (the run from the prior mean) when it is `optimal`,
+    /// `infeasible`, stopped by the caller or restarts are off; otherwise the
+    /// first `optimal` restart, or `first` with every run's counters when
+    /// none is.
+    pub(super) fn restart_if_stuck(&self, first: Solution, ctl: &SolveControl) -> Result<Solution> {
+        let restarts = self.options.restarts;
+        if first.status != Status::MaxIterations || restarts == 0 || ctl.stop_reason().is_some() {
+            return Ok(first);
+        }
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(self.options.seed ^ RESTART_STREAM);
+        let dim = self.whitening.dim();
+        let mean = DVector::zeros(dim);
+        let cap = self.options.max_iterations.min(RESTART_MAX_ITERATIONS);
+        let mut spent = Spent::from(&first);
+        for k in 1..=restarts {
+            if let Some(why) = ctl.stop_reason() {
+                let note = format!("restarts stopped after {} of {restarts}: {why}", k - 1);
+                return Ok(spent.onto(first, note));
+            }
+            let start = DVector::from_fn(dim, |_, _| StandardNormal.sample(&mut rng));
+            let sol = self.run(&start, &mean, cap, ctl)?;
+            spent.add(&sol);
+            if sol.status == Status::Optimal {
+                let note = format!(
+                    "the run from the prior mean found no feasible solution ({}); restart {k} of {restarts}, from a seeded prior draw, found this one: a local optimum, a feasible solution closer to the prior may exist",
+                    first.reason.as_deref().unwrap_or("no reason given")
+                );
+                return Ok(spent.onto(sol, note));
+            }
+        }
+        let note = format!(
+            "{restarts} restarts from seeded prior draws found no feasible solution either"
+        );
+        Ok(spent.onto(first, note))
+    }
+}
+
+/// Counters and wall time of every run of one solve.
+struct Spent {
+    stats: SolveStats,
+    solve_ms: f64,
+}
+
+impl Spent {
+    fn from(first: &Solution) -> Spent {
+        Spent {
+            stats: first.stats.clone(),
+            solve_ms: first.report.solve_ms,
+        }
+    }
+
+    fn add(&mut self, restart: &Solution) {
+        self.stats.absorb(&restart.stats);
+        self.stats.restarts += 1;
+        self.solve_ms += restart.report.solve_ms;
+    }
+
+    /// `sol` reporting the work of every run, with `note` as a warning.
+    fn onto(self, mut sol: Solution, note: String) -> Solution {
+        sol.report.iterations = self.stats.iterations;
+        sol.report.solve_ms = self.solve_ms;
+        sol.report.warnings.push(note);
+        sol.stats = self.stats;
+        sol
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::optim::example::{typical_request, ExampleSettings};
+    use crate::optim::nullspace::NullSpace;
+    use crate::robot::Robot;
+
+    /// A run that starts at a feasible point other than the prior mean
+    /// (a restart whose draw happens to be feasible) must still move to the
+    /// Mahalanobis-closest point, not return its start.
+    #[test]
+    fn a_run_from_a_feasible_start_still_converges_to_the_closest_point() {
+        let robot = Robot::panda().unwrap();
+        let settings = ExampleSettings {
+            n_obstacles: 0,
+            ..Default::default()
+        };
+        let mut req = typical_request(&robot, 5, &settings).unwrap();
+        req.goal = None;
+        req.obstacles.clear();
+        let p = req.validate(&robot).unwrap();
+        let ctl = SolveControl::default();
+        let best = p.solve(&ctl).unwrap();
+        assert_eq!(best.status, Status::Optimal);
+        // With only the start equality, the optimum is its projection.
+        let dim = p.whitening.dim();
+        let equalities = p.linear.equalities(&p.ends, &p.prior.mean);
+        let space = NullSpace::new(&equalities, dim).unwrap();
+        let z_best = p
+            .whitening
+            .whiten(&DVector::from_column_slice(&best.weights));
+        // A feasible start: the optimum moved 0.3 along the affine set.
+        let start = &z_best + space.basis.column(0) * 0.3;
+        let probe = p.evaluate(p.whitening.weights(&start).as_slice());
+        assert!(p.is_feasible(&probe), "the start must be feasible");
+        let zero = DVector::zeros(dim);
+        let run = p.run(&start, &zero, 100, &ctl).unwrap();
+        assert_eq!(run.status, Status::Optimal);
+        assert!(run.stats.iterations >= 1);
+        let z_run = p
+            .whitening
+            .whiten(&DVector::from_column_slice(&run.weights));
+        assert!(
+            (&z_run - &z_best).amax() < 1e-6,
+            "{}",
+            (&z_run - &z_best).amax()
+        );
+        assert!((run.mahalanobis - best.mahalanobis).abs() < 1e-6);
+    }
+}
