@@ -184,7 +184,7 @@ impl Qp {
         }
         let space = NullSpace::new(&self.equalities, self.dim()).ok_or(QpFailure::Infeasible)?;
         let mut sol = self
-            .restricted_to(&space)?
+            .restricted_to(&space)
             .solve_without_equalities(settings)?;
         sol.z = space.lift(&sol.z);
         sol.objective += space.distance_squared(&self.center);
@@ -192,8 +192,8 @@ impl Qp {
     }
 
     /// This problem over `z = z_p + N y` (variables `y`), without its
-    /// equalities; infeasible when the trust ball misses the affine set.
-    fn restricted_to(&self, space: &NullSpace) -> std::result::Result<Qp, QpFailure> {
+    /// equalities.
+    fn restricted_to(&self, space: &NullSpace) -> Qp {
         let inequalities = self
             .inequalities
             .iter()
@@ -216,23 +216,25 @@ impl Qp {
                 penalty: cone.penalty,
             })
             .collect();
-        let trust = match &self.trust {
-            None => None,
-            Some((centre, radius)) => {
-                let left = radius * radius - space.distance_squared(centre);
-                if left <= 0.0 {
-                    return Err(QpFailure::Infeasible);
-                }
-                Some((space.coordinates(centre), left.sqrt()))
-            }
-        };
-        Ok(Qp {
+        // The ball's centre moves onto the affine set and its radius becomes
+        // the ball's section there, but never less than half the radius: the
+        // trust region limits the step, it must never make a QP infeasible
+        // (an iterate within the equality tolerance can still lie a little
+        // off the set in whitened coordinates when the start is tight).
+        let trust = self.trust.as_ref().map(|(centre, radius)| {
+            let section = radius * radius - space.distance_squared(centre);
+            (
+                space.coordinates(centre),
+                section.max(0.25 * radius * radius).sqrt(),
+            )
+        });
+        Qp {
             center: space.coordinates(&self.center),
             equalities: Vec::new(),
             inequalities,
             cones,
             trust,
-        })
+        }
     }
 
     /// Solve a problem without equalities with Clarabel.
@@ -394,6 +396,28 @@ mod tests {
         // KKT: 2z = μ a with μ >= 0.
         let mu = sol.inequality_duals[0];
         assert!((2.0 * &sol.z - &a * mu).amax() < 1e-6, "mu {mu}");
+    }
+
+    #[test]
+    fn a_trust_ball_off_the_equality_set_is_recentred_not_infeasible() {
+        // min |z - c|² s.t. z0 + z1 = 1, trust ball of radius 0.1 around a
+        // point 1.0 away from the line: the ball moves onto the line (its
+        // centre's projection, radius 0.05 there).
+        let n = 3;
+        let mut qp = Qp::new(n);
+        qp.center = DVector::from_vec(vec![5.0, -4.0, 0.0]);
+        qp.equalities
+            .push((DVector::from_vec(vec![1.0, 1.0, 0.0]), 1.0));
+        let off = std::f64::consts::FRAC_1_SQRT_2;
+        let ball_centre = DVector::from_vec(vec![0.5 + off, 0.5 + off, 0.0]);
+        qp.trust = Some((ball_centre, 0.1));
+        let sol = qp.solve(&QpSettings::default()).unwrap();
+        assert!((sol.z[0] + sol.z[1] - 1.0).abs() < 1e-9);
+        let on_line = DVector::from_vec(vec![0.5, 0.5, 0.0]);
+        let moved = (&sol.z - &on_line).norm();
+        assert!((moved - 0.05).abs() < 1e-6, "{moved}");
+        // The step goes towards the cost centre's projection (4.5, -3.5, 0).
+        assert!(sol.z[0] > 0.5 && sol.z[1] < 0.5);
     }
 
     #[test]
