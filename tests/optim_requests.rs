@@ -154,8 +154,8 @@ fn infeasible_cases_are_diagnosed_with_the_constraint() {
     let resp = optimize(&r, &robot).unwrap();
     assert_eq!(resp.status, Status::Infeasible);
     assert!(resp.reason.unwrap().contains("out of reach"));
-    // Goal buried in an obstacle (deeper than tolerance + clearance + the
-    // TCP's distance to the fingers): diagnosed up front.
+    // Goal buried in an obstacle (deeper than tolerance + the TCP's
+    // distance to the nearest robot shape - clearance): diagnosed up front.
     let mut r = base.clone();
     let goal = r.goal.as_ref().unwrap().position;
     r.obstacles.push(Obstacle {
@@ -329,4 +329,88 @@ fn a_local_minimum_from_the_prior_mean_is_escaped_by_a_seeded_restart() {
     assert_eq!(found.deterministic_json(), again.deterministic_json());
     req.options.restarts = 33;
     assert_eq!(field_of(&req, &robot), "options.restarts");
+}
+
+/// Distance from the TCP to the nearest robot collision shape (rigid with
+/// the TCP), measured with a tiny sphere at the TCP.
+fn tcp_to_nearest_shape(robot: &Robot) -> f64 {
+    let home = robot.home();
+    let tcp = robot.tcp_pose(&home).translation.vector;
+    let probe = dpmp::scene::Scene::new(vec![Obstacle {
+        id: "probe".into(),
+        shape: ObstacleShape::Sphere {
+            center: tcp.into(),
+            radius: 1e-9,
+        },
+    }])
+    .unwrap();
+    probe
+        .min_clearance(robot, &robot.fk(&home))
+        .unwrap()
+        .distance
+}
+
+#[test]
+fn the_buried_goal_certificate_is_sharp_and_holds_for_the_real_gripper() {
+    // A sphere centred on the goal: the goal's depth is the radius, and
+    // the certificate fires above tolerance + r - clearance.
+    let (robot, base) = request(2, 0);
+    let goal = base.goal.as_ref().unwrap().clone();
+    let reach = tcp_to_nearest_shape(&robot).max(0.0);
+    let threshold = goal.tolerance_m + reach - base.clearance_m;
+    let with_sphere = |radius: f64| {
+        let mut r = base.clone();
+        r.obstacles = vec![Obstacle {
+            id: "over-goal".into(),
+            shape: ObstacleShape::Sphere {
+                center: goal.position,
+                radius,
+            },
+        }];
+        r
+    };
+    let above = with_sphere(threshold.max(0.0) + 5e-4);
+    let problem = above.validate(&robot).unwrap();
+    let reason = problem.diagnose().unwrap_or_default();
+    assert!(reason.contains("deep inside"), "{reason}");
+    // Half a millimetre shallower than the threshold it must stay quiet.
+    if threshold > 1e-3 {
+        let below = with_sphere(threshold - 5e-4).validate(&robot).unwrap();
+        assert!(!below.diagnose().unwrap_or_default().contains("deep inside"));
+    }
+    // The proof, checked on the robot: every TCP on the tolerance sphere
+    // (the least deep points) leaves some robot shape closer than the
+    // clearance to the obstacle.
+    let scene = dpmp::scene::Scene::new(above.obstacles.clone()).unwrap();
+    let start = base.start.clone().unwrap();
+    let options = dpmp::robot::IkOptions {
+        tolerance_m: 1e-5,
+        ..Default::default()
+    };
+    let mut checked = 0;
+    for axis in 0..3 {
+        for sign in [-1.0, 1.0] {
+            let mut position = goal.position;
+            position[axis] += sign * goal.tolerance_m;
+            let target = dpmp::robot::IkTarget {
+                position: position.into(),
+                approach_axis: None,
+            };
+            let Ok(sol) = robot.ik(&target, &start, &options) else {
+                continue;
+            };
+            if sol.position_error_m > 1e-4 {
+                continue;
+            }
+            let closest = scene.min_clearance(&robot, &robot.fk(&sol.q)).unwrap();
+            assert!(
+                closest.distance < base.clearance_m,
+                "TCP at {position:?}: clearance {} >= {}",
+                closest.distance,
+                base.clearance_m
+            );
+            checked += 1;
+        }
+    }
+    assert!(checked >= 3, "only {checked} IK solutions");
 }

@@ -71,16 +71,24 @@ impl Problem {
         self.ik_failure(&p, goal.tolerance_m)
     }
 
-    /// The goal is buried in an obstacle when every TCP position within
-    /// the tolerance lies deeper inside it than the clearance plus the
-    /// distance from the TCP to the nearest robot collision shape (the
-    /// fingers): then that shape is inside too. Signed distances are
-    /// 1-Lipschitz, so depth at the goal ≥ tolerance + clearance + that
-    /// distance proves it.
+    /// The goal is buried in an obstacle when no TCP position within the
+    /// tolerance lets the gripper keep the clearance. Let `d` be the goal's
+    /// depth in one convex part of the obstacle and `r` the distance from
+    /// the TCP to its nearest robot collision shape (rigid with the TCP).
+    /// Signed distance is 1-Lipschitz: a TCP within `tolerance` of the goal
+    /// lies at signed distance ≤ tolerance - d from the part, so a point
+    /// of that shape lies at ≤ tolerance - d + r, and the shape's clearance
+    /// is at most that (negative when the point is inside). Hence
+    /// `d > tolerance + r - clearance` (plus the verification tolerances)
+    /// proves that every trajectory ending within the tolerance breaks the
+    /// clearance at its last sample.
     fn goal_buried(&self, p: &Point3<f64>, tolerance: f64) -> Option<String> {
         let (i, depth) = self.scene.deepest_containing(p)?;
         let reach = self.tcp_to_robot_shapes().max(0.0);
-        (depth >= tolerance + self.clearance_m + reach).then(|| {
+        // Our own verification accepts the goal and the clearance each
+        // within FEASIBILITY_TOLERANCE; the proof must beat both.
+        let needed = tolerance + reach - self.clearance_m + 2.0 * FEASIBILITY_TOLERANCE + 1e-9;
+        (depth > needed).then(|| {
             format!(
                 "goal: the goal lies {depth:.4} m deep inside obstacle '{}': with tolerance_m {tolerance:.4} the gripper (whose nearest collision shape is {reach:.4} m from the TCP) cannot keep clearance_m {:.4}",
                 self.scene.obstacles()[i].id,
