@@ -4,8 +4,9 @@
 //! peak RSS, then runs criterion on a few representative problems.
 //!
 //! `cargo bench --bench optim` (set `DPMP_BENCH_PROBLEMS` to change the
-//! number of problems, default 100; `DPMP_BENCH_SWEEP_ONLY=1` skips the
-//! criterion part).
+//! number of problems, default 100; `DPMP_BENCH_RESTARTS` to override
+//! `options.restarts`, e.g. 0 for the run from the prior mean alone;
+//! `DPMP_BENCH_SWEEP_ONLY=1` skips the criterion part).
 
 use criterion::{black_box, Criterion};
 use dpmp::optim::example::{typical_request, ExampleSettings};
@@ -13,11 +14,25 @@ use dpmp::optim::{optimize, OptimizeRequest, SolveControl, Status};
 use dpmp::robot::Robot;
 use std::time::Instant;
 
-fn problems(robot: &Robot, n: usize) -> Vec<OptimizeRequest> {
+fn problems(robot: &Robot, n: usize, restarts: Option<usize>) -> Vec<OptimizeRequest> {
     let settings = ExampleSettings::default();
     (0..n as u64)
-        .map(|seed| typical_request(robot, seed, &settings).expect("example request"))
+        .map(|seed| {
+            let mut request = typical_request(robot, seed, &settings).expect("example request");
+            if let Some(r) = restarts {
+                request.options.restarts = r;
+            }
+            request
+        })
         .collect()
+}
+
+fn env_number(name: &str) -> Option<usize> {
+    let value = std::env::var(name).ok()?;
+    match value.parse() {
+        Ok(n) => Some(n),
+        Err(_) => panic!("{name}={value:?} is not a non-negative integer"),
+    }
 }
 
 fn percentile(sorted: &[f64], p: f64) -> f64 {
@@ -128,11 +143,8 @@ fn sweep(robot: &Robot, requests: &[OptimizeRequest]) {
 
 fn main() {
     let robot = Robot::panda().expect("panda");
-    let n = std::env::var("DPMP_BENCH_PROBLEMS")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(100);
-    let requests = problems(&robot, n);
+    let n = env_number("DPMP_BENCH_PROBLEMS").unwrap_or(100);
+    let requests = problems(&robot, n, env_number("DPMP_BENCH_RESTARTS"));
     sweep(&robot, &requests);
     if std::env::var_os("DPMP_BENCH_SWEEP_ONLY").is_some() {
         return;

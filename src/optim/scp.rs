@@ -15,15 +15,17 @@
 //! true merit `|z - c|² + ρ·violation` (real FK and parry distances, every
 //! pair at every phase) improves by at least 10 % of the model's
 //! prediction; otherwise up to two halvings of the step are tried (an
-//! evaluation is much cheaper than a QP) before the trust region shrinks. When the iteration
-//! stalls short of feasibility, generation becomes exact (every violated
-//! clearance row joins the QP), and only a stall on that full model raises
-//! the penalty, up to a cap, after which the solve stops as
-//! `max_iterations` naming the worst constraint (`infeasible` is reserved
-//! for proofs: [`Problem::diagnose`]'s certificates and a QP whose hard
-//! limit rows Clarabel proves incompatible). A converged feasible iterate is
-//! verified densely; flagged phases join the optimisation set and the loop
-//! goes on.
+//! evaluation is much cheaper than a QP) before the trust region shrinks.
+//! When the iteration stalls short of feasibility, generation becomes exact
+//! (every violated clearance row joins the QP), and only a stall on that
+//! full model raises the penalty (each switch resets the trust region to at
+//! least its initial radius: the model changed, and a radius shrunk while
+//! stalling would cost one QP per doubling to grow back), up to a cap,
+//! after which the solve stops as `max_iterations` naming the worst
+//! constraint (`infeasible` is reserved for proofs: [`Problem::diagnose`]'s
+//! certificates and a QP whose hard limit rows Clarabel proves
+//! incompatible). A converged feasible iterate is verified densely; flagged
+//! phases join the optimisation set and the loop goes on.
 
 use super::evaluate::GridEval;
 use super::phases::PhaseRows;
@@ -49,10 +51,11 @@ pub(super) fn buffered_tolerance(tolerance_m: f64) -> f64 {
 }
 /// Largest L1 penalty before slack is declared irreducible.
 pub const MAX_PENALTY: f64 = 1e6;
-/// A feasible iterate whose next step is predicted to improve the merit by
-/// less than this fraction of it has converged (the tail of SCP on curved
-/// constraints is linear; this stops it at a relative cost error of about
-/// this size).
+/// An iterate whose next step is predicted to improve the merit by less
+/// than this fraction of it has converged when feasible (the tail of SCP
+/// on curved constraints is linear; this stops it at a relative cost error
+/// of about this size) and has stalled when not (exact generation or a
+/// larger penalty follows).
 const OPTIMALITY_TOLERANCE: f64 = 1e-3;
 /// Largest trust-region half-width.
 pub const MAX_TRUST_REGION: f64 = 1e3;
@@ -334,14 +337,16 @@ impl Problem {
             );
             let step = alpha * full_step;
             if let Some((next, predicted, actual)) = accepted {
-                // A step that barely moves the merit is a stall whether
-                // or not the iterate is feasible: an infeasible crawl (e.g.
-                // along a kink of the distance) goes on to exact generation
-                // and a larger penalty instead of spending the iteration cap.
+                // A step that barely moves the merit, or is predicted to
+                // gain less than the optimality tolerance, is a stall
+                // whether or not the iterate is feasible: an infeasible
+                // crawl (e.g. along a kink of the distance, or towards a
+                // local minimum of the violation) goes on to exact
+                // generation and a larger penalty instead of spending the
+                // iteration cap.
                 let tiny = step <= 1e-6 * (1.0 + next.z.amax())
-                    || predicted <= 1e-7 * scale
                     || actual.abs() <= 1e-6 * scale
-                    || (next.feasible() && predicted <= OPTIMALITY_TOLERANCE * scale);
+                    || predicted <= OPTIMALITY_TOLERANCE * scale;
                 if alpha < 1.0 {
                     radius = (0.25 * radius).min(0.5 * full_step);
                 } else if eval.linear_ok && actual >= 0.75 * predicted && step >= 0.9 * radius {
@@ -365,9 +370,11 @@ impl Problem {
                 // increase (and `infeasible`) rests on the full model.
                 exact = true;
                 converged = false;
+                radius = radius.max(self.options.trust_region);
             } else if converged && !eval.feasible() && eval.linear_ok {
                 rho *= 10.0;
                 converged = false;
+                radius = radius.max(self.options.trust_region);
                 if rho > MAX_PENALTY {
                     stats.final_penalty = rho;
                     // A stall of a non-convex penalty method is a local
