@@ -31,7 +31,10 @@ fn env_number(name: &str) -> Option<usize> {
     let value = std::env::var(name).ok()?;
     match value.parse() {
         Ok(n) => Some(n),
-        Err(_) => panic!("{name}={value:?} is not a non-negative integer"),
+        Err(_) => {
+            eprintln!("error: {name}={value:?} is not a non-negative integer");
+            std::process::exit(2);
+        }
     }
 }
 
