@@ -364,17 +364,19 @@ impl Problem {
                     radius = self.options.trust_region;
                 }
             }
-            if converged && !eval.feasible() && eval.linear_ok && !exact {
-                // A stall on the working-set model proves nothing: go on
-                // with every clearance row generated, so that a penalty
-                // increase (and `infeasible`) rests on the full model.
-                exact = true;
+            if converged && !eval.feasible() && eval.linear_ok {
+                // A stall short of feasibility changes the model: the trust
+                // region it shrank to belongs to the old one.
                 converged = false;
                 radius = radius.max(self.options.trust_region);
-            } else if converged && !eval.feasible() && eval.linear_ok {
+                if !exact {
+                    // A stall on the working-set model proves nothing: go
+                    // on with every clearance row generated, so that a
+                    // penalty increase rests on the full model.
+                    exact = true;
+                    continue;
+                }
                 rho *= 10.0;
-                converged = false;
-                radius = radius.max(self.options.trust_region);
                 if rho > MAX_PENALTY {
                     stats.final_penalty = rho;
                     // A stall of a non-convex penalty method is a local
