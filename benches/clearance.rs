@@ -1,5 +1,7 @@
 //! Minimum clearance of the whole Panda against a 20-berry cluster, with
-//! its gradient (target: ≤ 20 µs per configuration on the 2-core dev box).
+//! its gradient, on the shipped mesh model (convex hulls of Franka's
+//! collision meshes) and, in the same run, on the former capsule model
+//! (`benches/fixtures/panda_capsules.urdf`, not conservative) for the ratio.
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use dpmp::robot::{Robot, PANDA_HOME};
@@ -33,17 +35,26 @@ fn berry_cluster(robot: &Robot, ahead: f64) -> Vec<Obstacle> {
         .collect()
 }
 
+const CAPSULE_URDF: &str = include_str!("fixtures/panda_capsules.urdf");
+
 fn clearance(c: &mut Criterion) {
-    let robot = Robot::panda().expect("the shipped Panda loads");
-    for (name, ahead) in [("near", 0.12), ("far", 0.5)] {
-        let scene = Scene::new(berry_cluster(&robot, ahead)).expect("valid cluster");
-        c.bench_function(&format!("min_clearance_gradient_20_berries_{name}"), |b| {
-            b.iter(|| scene.min_clearance_with_gradient(&robot, black_box(&PANDA_HOME)))
-        });
-        let frames = robot.fk(&PANDA_HOME);
-        c.bench_function(&format!("clearances_within_5cm_20_berries_{name}"), |b| {
-            b.iter(|| scene.clearances_within(&robot, black_box(&frames), 0.05))
-        });
+    let meshes = Robot::panda().expect("the shipped Panda loads");
+    let capsules = Robot::from_urdf_str(CAPSULE_URDF, "panda_link0", "panda_tcp")
+        .and_then(|r| r.with_home(&PANDA_HOME))
+        .expect("the capsule fixture loads");
+    for (model, robot) in [("mesh", &meshes), ("capsules", &capsules)] {
+        for (name, ahead) in [("near", 0.12), ("far", 0.5)] {
+            let scene = Scene::new(berry_cluster(robot, ahead)).expect("valid cluster");
+            c.bench_function(
+                &format!("{model}/min_clearance_gradient_20_berries_{name}"),
+                |b| b.iter(|| scene.min_clearance_with_gradient(robot, black_box(&PANDA_HOME))),
+            );
+            let frames = robot.fk(&PANDA_HOME);
+            c.bench_function(
+                &format!("{model}/clearances_within_5cm_20_berries_{name}"),
+                |b| b.iter(|| scene.clearances_within(robot, black_box(&frames), 0.05)),
+            );
+        }
     }
 }
 

@@ -303,10 +303,11 @@ fn a_cancelled_solve_stops_with_max_iterations_and_a_warning() {
 
 #[test]
 fn a_local_minimum_from_the_prior_mean_is_escaped_by_a_seeded_restart() {
-    // Typical problem 3: the run from the prior mean settles on the wrong
-    // side of the cluster (the TCP ends ~7 cm from the goal at the largest
-    // penalty), but the problem is feasible.
-    let (robot, mut req) = request(3, 10);
+    // Typical problem 21: the run from the prior mean ends in a local
+    // minimum of the violation (max_iterations), but the problem is
+    // feasible and a seeded restart solves it (on the mesh geometry; 39 of
+    // typical problems 0..40 are solved without restarts).
+    let (robot, mut req) = request(21, 10);
     req.options.restarts = 0;
     let stuck = optimize(&req, &robot).unwrap();
     assert_eq!(stuck.status, Status::MaxIterations);
@@ -333,14 +334,14 @@ fn a_stalled_infeasible_run_raises_its_penalty_with_a_fresh_trust_region() {
     // violation creeps towards a local minimum in ever smaller steps) and
     // is solved after the penalty rises. Counting that creep as a stall,
     // and restarting the trust region after the increase instead of
-    // doubling it back from the ~1e-4 it shrank to, takes 23 SCP
-    // iterations where the old rules took 44; the iteration count is
-    // deterministic.
+    // doubling it back from the ~1e-4 it shrank to, took 23 SCP iterations
+    // where the old rules took 44 on the former capsule geometry; on the
+    // mesh hulls it takes 33. The iteration count is deterministic.
     let (robot, mut req) = request(2, 10);
     req.options.restarts = 0;
     let found = optimize(&req, &robot).unwrap();
     assert_verified_optimal(&req, &robot, &found);
-    assert!(found.report.iterations <= 30, "{}", found.report.iterations);
+    assert!(found.report.iterations <= 36, "{}", found.report.iterations);
     assert!(found.mahalanobis < 6.33, "{}", found.mahalanobis);
 }
 

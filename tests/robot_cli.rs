@@ -110,8 +110,24 @@ fn ik_and_shapes_print_json() {
     let (code, json, err) = dpmp(&["robot", "shapes"]);
     assert_eq!(code, 0, "{err}");
     let shapes = json["shapes"].as_array().unwrap();
-    assert!(shapes.len() >= 20);
+    // Nine mesh hulls (links 0..7, hand) and four boxes per finger.
+    assert_eq!(shapes.len(), 17);
     assert!(shapes
         .iter()
         .any(|s| s["link_name"] == "panda_hand" && s["geometry"]["type"] == "box"));
+    assert!(shapes
+        .iter()
+        .any(|s| s["link_name"] == "panda_link5" && s["geometry"]["type"] == "convex"));
+    let (code, json, err) = dpmp(&["robot", "geometry", "--spacing", "0.005"]);
+    assert_eq!(code, 0, "{err}");
+    let links = json["links"].as_array().unwrap();
+    assert_eq!(links.len(), 9);
+    for l in links {
+        let t = &l["tightness"];
+        assert!(t["containment_excess_m"].as_f64().unwrap() <= 1e-6, "{l}");
+        assert!(t["max_gap_m"].as_f64().unwrap() <= 0.0015, "{l}");
+    }
+    let (code, _, err) = dpmp(&["robot", "geometry", "--spacing", "0"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("--spacing"), "{err}");
 }

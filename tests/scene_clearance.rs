@@ -139,14 +139,15 @@ fn penetration_is_negative_with_the_right_depth_and_normal() {
     let robot = panda();
     let frames = robot.fk(&PANDA_HOME);
     let hand = frames.poses[robot.link_index("panda_hand").unwrap()];
-    let inside = hand * Point3::new(0.0, 0.0, 0.02);
+    // 7 mm inside the hand mesh's flat +x face (x = 0.032 in the hand frame).
+    let inside = hand * Point3::new(0.025, 0.0, 0.02);
     let center = inside.coords.into();
     let scene = Scene::new(vec![sphere("inside", center, 0.02)]).unwrap();
     let c = scene.min_clearance(&robot, &frames).unwrap();
     let (expect, _) = closed_form_sphere_clearance(&robot, &PANDA_HOME, &center, 0.02);
     assert!(
         expect < -0.02,
-        "the TCP is inside the fingers' boxes: {expect}"
+        "the ball's centre is inside the hand: {expect}"
     );
     assert!(
         (c.distance - expect).abs() < 1e-4,
@@ -158,7 +159,7 @@ fn penetration_is_negative_with_the_right_depth_and_normal() {
     assert_eq!(scene.obstacle_containing(&inside, 0.0), Some(0));
     // the normal points out of the obstacle towards the robot: pushing the
     // ball along it (towards the robot) deepens the penetration
-    let pushed = Vector3::from(center) + Vector3::from(c.normal) * 0.005;
+    let pushed = Vector3::from(center) + Vector3::from(c.normal) * 0.002;
     let (deeper, _) = closed_form_sphere_clearance(&robot, &PANDA_HOME, &pushed.into(), 0.02);
     assert!(deeper < expect, "{deeper} vs {expect}");
 }

@@ -19,6 +19,20 @@ pub enum RobotCommand {
     Ik(IkArgs),
     /// The collision primitives of every link (link frames).
     Shapes(ModelArgs),
+    /// Per mesh link: the exact containment check of the mesh in its hull
+    /// and how much clearance the hull gives away (gap mean/median/max).
+    Geometry(GeometryArgs),
+}
+
+/// Arguments of `dpmp robot geometry`.
+#[derive(Debug, clap::Args)]
+pub struct GeometryArgs {
+    /// Spacing (m) of the points sampled on each hull's surface for the gap.
+    #[arg(long, default_value_t = 0.002)]
+    pub spacing: f64,
+    /// The robot model.
+    #[command(flatten)]
+    pub model: ModelArgs,
 }
 
 /// Which robot to load (default: the shipped Panda).
@@ -89,6 +103,19 @@ pub fn run(command: RobotCommand) -> Result<()> {
         RobotCommand::Shapes(model) => {
             let robot = load_robot(&model)?;
             json!({"link_names": robot.link_names(), "shapes": robot.collision_shapes()})
+        }
+        RobotCommand::Geometry(args) => {
+            if !(args.spacing.is_finite() && (0.0005..=0.05).contains(&args.spacing)) {
+                return Err(Error::invalid(
+                    "--spacing",
+                    format!("must be within [0.0005, 0.05] m, got {}", args.spacing),
+                ));
+            }
+            let robot = load_robot(&args.model)?;
+            json!({
+                "links": robot.hull_tightness(args.spacing),
+                "warnings": robot.warnings(),
+            })
         }
     };
     super::print_json(&value)

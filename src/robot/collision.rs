@@ -1,13 +1,19 @@
-//! Link collision primitives: capsules, spheres and boxes in link frames,
-//! converted from URDF `<collision>` elements.
+//! Link collision geometry: convex hulls of meshes, capsules, spheres and
+//! boxes in link frames, converted from URDF `<collision>` elements.
 //!
-//! URDF `<capsule>` (urdf-rs) and `<cylinder>` are both taken as capsules
-//! about the origin's z axis: a cylinder becomes the capsule with the same
-//! axis and radius, which contains it (conservative). Meshes are rejected:
-//! obstacle clearance needs convex primitives fitted to them (see
-//! [`super::fit`]).
+//! Every shape here contains the geometry its URDF element describes, so a
+//! distance measured to it never exceeds the distance to the real link:
+//! - `<mesh>` becomes the convex hull of the mesh ([`super::hull`]), which
+//!   contains every triangle by convexity;
+//! - `<capsule>` (urdf-rs) and `<cylinder>` are both taken as capsules about
+//!   the origin's z axis: a cylinder becomes the capsule with the same axis
+//!   and radius, which contains it;
+//! - `<sphere>` and `<box>` are exact.
 
 use super::chain::isometry_from_xyz_rpy;
+use super::hull::ConvexHull;
+use super::mesh::{MeshFormat, TriangleMesh};
+use super::mesh_files::MeshFiles;
 use crate::{Error, Result};
 use nalgebra::{Isometry3, Point3};
 use serde::Serialize;
@@ -41,6 +47,9 @@ pub enum ShapeGeometry {
         /// Orientation of the box axes, quaternion `[x, y, z, w]`.
         rotation: [f64; 4],
     },
+    /// The convex hull of a collision mesh (`vertices`, outward `faces`,
+    /// and the `allowance_m` subtracted from distances measured to it).
+    Convex(ConvexHull),
 }
 
 /// A collision primitive attached to a chain link.
@@ -82,6 +91,22 @@ impl ShapeGeometry {
                     rotation: [r.i, r.j, r.k, r.w],
                 }
             }
+            ShapeGeometry::Convex(hull) => ShapeGeometry::Convex(hull.transformed(pose)),
+        }
+    }
+
+    /// Farthest distance from `origin` to a point of the shape (same frame).
+    pub fn reach_from(&self, origin: &[f64; 3]) -> f64 {
+        let d = |p: &[f64; 3]| (Point3::from(*p) - Point3::from(*origin)).norm();
+        match self {
+            ShapeGeometry::Capsule { a, b, radius } => d(a).max(d(b)) + radius,
+            ShapeGeometry::Sphere { center, radius } => d(center) + radius,
+            ShapeGeometry::Box {
+                center,
+                half_extents,
+                ..
+            } => d(center) + nalgebra::Vector3::from(*half_extents).norm(),
+            ShapeGeometry::Convex(hull) => hull.reach_from(origin),
         }
     }
 
@@ -94,8 +119,10 @@ impl ShapeGeometry {
     pub fn signed_distance(&self, p: &[f64; 3]) -> f64 {
         match self {
             ShapeGeometry::Capsule { a, b, radius } => {
-                super::fit::segment_distance(p, a, b) - radius
+                super::hull::point_segment_distance(&(*p).into(), &(*a).into(), &(*b).into())
+                    - radius
             }
+            ShapeGeometry::Convex(hull) => hull.signed_distance(p),
             ShapeGeometry::Sphere { center, radius } => {
                 (Point3::from(*p) - Point3::from(*center)).norm() - radius
             }
@@ -123,11 +150,15 @@ impl ShapeGeometry {
 
 /// Convert one URDF `<collision>` element (origin + geometry) into a
 /// primitive in the frame `frame_from_link` maps the link frame into.
-/// `element` names the element for errors.
+/// `element` names the element for errors; mesh files are read from
+/// `files`, and what is worth knowing but not wrong (an open mesh) is
+/// pushed to `warnings`.
 pub fn geometry_from_urdf(
     element: &str,
     collision: &urdf_rs::Collision,
     frame_from_link: &Isometry3<f64>,
+    files: &MeshFiles,
+    warnings: &mut Vec<String>,
 ) -> Result<ShapeGeometry> {
     let xyz = collision.origin.xyz.0;
     let rpy = collision.origin.rpy.0;
@@ -162,17 +193,36 @@ pub fn geometry_from_urdf(
                 rotation: [0.0, 0.0, 0.0, 1.0],
             }
         }
-        urdf_rs::Geometry::Mesh { filename, .. } => {
-            return Err(Error::invalid(
-                format!("{element}.geometry"),
-                format!(
-                    "mesh collision geometry ({filename}) is not supported: approximate it with \
-                     capsules, cylinders, spheres or boxes"
-                ),
-            ))
+        urdf_rs::Geometry::Mesh { filename, scale } => {
+            let field = format!("{element}.geometry.mesh");
+            let scale = scale.map(|s| s.0).unwrap_or([1.0; 3]);
+            let mesh = read_mesh(filename, scale, files).map_err(|m| Error::invalid(&field, m))?;
+            let open = mesh.open_edges();
+            if open > 0 {
+                warnings.push(format!(
+                    "{field}: mesh '{filename}' is not closed ({open} edges not shared by exactly \
+                     two triangles); its convex hull is used and contains it all the same"
+                ));
+            }
+            let placed = mesh.mapped(|p| (origin * Point3::from(*p)).coords.into());
+            let hull = ConvexHull::of_mesh(&placed)
+                .map_err(|m| Error::invalid(&field, format!("mesh '{filename}': {m}")))?;
+            return Ok(ShapeGeometry::Convex(hull));
         }
     };
     Ok(local.transformed(&origin))
+}
+
+/// Read, parse, scale and validate one mesh file; messages name the file.
+pub fn read_mesh(
+    filename: &str,
+    scale: [f64; 3],
+    files: &MeshFiles,
+) -> std::result::Result<TriangleMesh, String> {
+    let format =
+        MeshFormat::from_file_name(filename).map_err(|m| format!("mesh '{filename}': {m}"))?;
+    let (location, bytes) = files.read(filename)?;
+    TriangleMesh::parse(&bytes, format, scale).map_err(|m| format!("mesh file {location}: {m}"))
 }
 
 fn ensure_positive(field: &str, value: f64) -> Result<()> {

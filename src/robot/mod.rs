@@ -7,33 +7,80 @@
 //! - [`fk`]: forward kinematics of every link frame ([`Frames`]);
 //! - [`jacobian`]: Jacobians of points attached to links and of the TCP;
 //! - [`ik`]: inverse kinematics for a TCP position and approach axis;
-//! - [`collision`]: the link collision primitives ([`LinkShape`]);
-//! - [`fit`] and [`stl`]: fitting capsules to collision meshes (how
-//!   `models/panda/panda.urdf` was made) and reading binary STL.
+//! - [`collision`]: the link collision geometry ([`LinkShape`]);
+//! - [`mesh`], [`mesh_files`] and [`hull`]: collision meshes (STL, OBJ),
+//!   where their files are found, and the convex hull that contains each
+//!   one (the conservative geometry every clearance is measured against).
 //!
-//! The Franka Panda ([`Robot::panda`]) is the default; any URDF serial arm
-//! with revolute, prismatic and fixed joints loads the same way.
+//! The Franka Panda ([`Robot::panda`]) is the default; its collision
+//! geometry is Franka's published collision meshes (embedded in the binary
+//! from `models/panda/meshes/collision/`). Any URDF serial arm with
+//! revolute, prismatic and fixed joints and mesh or primitive collision
+//! geometry loads the same way.
 
 pub mod chain;
 pub mod collision;
-pub mod fit;
 pub mod fk;
+pub mod hull;
+pub mod hull_query;
 pub mod ik;
 pub mod jacobian;
-pub mod stl;
+pub mod mesh;
+pub mod mesh_files;
 pub mod urdf;
 
 pub use collision::{LinkShape, ShapeGeometry};
 pub use fk::Frames;
 pub use ik::{IkOptions, IkSolution, IkTarget};
+pub use mesh_files::MeshFiles;
 
 use crate::{Error, Result};
-use chain::ChainStep;
+use chain::{ChainStep, Motion};
 use serde::Serialize;
 
-/// The shipped Panda description (see the comment at its top for the
-/// collision-geometry fit).
+/// The shipped Panda description (see the comment at its top).
 pub const PANDA_URDF: &str = include_str!("../../models/panda/panda.urdf");
+
+/// Franka's collision meshes (Apache-2.0, see `models/panda/NOTICE`), by the
+/// names `models/panda/panda.urdf` gives them.
+pub const PANDA_MESHES: &[(&str, &[u8])] = &[
+    (
+        "meshes/collision/link0.stl",
+        include_bytes!("../../models/panda/meshes/collision/link0.stl"),
+    ),
+    (
+        "meshes/collision/link1.stl",
+        include_bytes!("../../models/panda/meshes/collision/link1.stl"),
+    ),
+    (
+        "meshes/collision/link2.stl",
+        include_bytes!("../../models/panda/meshes/collision/link2.stl"),
+    ),
+    (
+        "meshes/collision/link3.stl",
+        include_bytes!("../../models/panda/meshes/collision/link3.stl"),
+    ),
+    (
+        "meshes/collision/link4.stl",
+        include_bytes!("../../models/panda/meshes/collision/link4.stl"),
+    ),
+    (
+        "meshes/collision/link5.stl",
+        include_bytes!("../../models/panda/meshes/collision/link5.stl"),
+    ),
+    (
+        "meshes/collision/link6.stl",
+        include_bytes!("../../models/panda/meshes/collision/link6.stl"),
+    ),
+    (
+        "meshes/collision/link7.stl",
+        include_bytes!("../../models/panda/meshes/collision/link7.stl"),
+    ),
+    (
+        "meshes/collision/hand.stl",
+        include_bytes!("../../models/panda/meshes/collision/hand.stl"),
+    ),
+];
 
 /// The paper's home configuration of the Panda (rad), shared by all 25
 /// annotated demonstrations.
@@ -78,26 +125,119 @@ pub struct Robot {
     pub(crate) dof_step: Vec<usize>,
     pub(crate) shapes: Vec<LinkShape>,
     pub(crate) home: Vec<f64>,
+    /// Loading remarks that are not errors (open meshes).
+    pub(crate) warnings: Vec<String>,
+    /// Per actuated joint: an upper bound on how far any point of the
+    /// collision geometry moves per unit of that joint (m/rad; 1 for a
+    /// prismatic joint). See [`Robot::lever_arms`].
+    pub(crate) lever_arms: Vec<f64>,
 }
 
 impl Robot {
     /// The shipped Franka Panda (`models/panda/panda.urdf`, embedded), from
     /// `panda_link0` to `panda_tcp`, with the paper's home configuration.
+    /// The meshes are embedded; the robot is built once per process and
+    /// cloned (the hulls are shared).
     pub fn panda() -> Result<Robot> {
-        Robot::from_urdf_str(PANDA_URDF, "panda_link0", "panda_tcp")?.with_home(&PANDA_HOME)
+        static PANDA: std::sync::OnceLock<std::result::Result<Robot, String>> =
+            std::sync::OnceLock::new();
+        PANDA
+            .get_or_init(|| {
+                urdf::robot_from_str(
+                    PANDA_URDF,
+                    "panda_link0",
+                    "panda_tcp",
+                    &MeshFiles::Embedded(PANDA_MESHES),
+                )
+                .and_then(|r| r.with_home(&PANDA_HOME))
+                .map_err(|e| e.to_string())
+            })
+            .clone()
+            .map_err(|m| Error::invalid("robot", m))
     }
 
     /// Load the chain from `base` to `tip` out of URDF text. The home
-    /// configuration is the middle of every joint range.
+    /// configuration is the middle of every joint range. Mesh collision
+    /// geometry needs a file to resolve against: use
+    /// [`Robot::from_urdf_file`].
     pub fn from_urdf_str(xml: &str, base: &str, tip: &str) -> Result<Robot> {
-        urdf::robot_from_str(xml, base, tip)
+        urdf::robot_from_str(xml, base, tip, &MeshFiles::None)
     }
 
-    /// Load the chain from `base` to `tip` out of a URDF file; errors name
-    /// the file.
+    /// Load the chain from `base` to `tip` out of a URDF file; mesh names
+    /// resolve against its folder ([`mesh_files`]); errors name the file.
     pub fn from_urdf_file(path: &std::path::Path, base: &str, tip: &str) -> Result<Robot> {
         let text = std::fs::read_to_string(path).map_err(|e| Error::file(path, e.to_string()))?;
-        Robot::from_urdf_str(&text, base, tip).map_err(|e| Error::file(path, e.to_string()))
+        let dir = path
+            .parent()
+            .map(std::path::Path::to_path_buf)
+            .unwrap_or_default();
+        urdf::robot_from_str(&text, base, tip, &MeshFiles::Folder(dir))
+            .map_err(|e| Error::file(path, e.to_string()))
+    }
+
+    /// Remarks from loading that are not errors (e.g. a mesh that is not
+    /// closed), one sentence each naming the URDF element.
+    pub fn warnings(&self) -> &[String] {
+        &self.warnings
+    }
+
+    /// Per actuated joint, an upper bound (m/rad) on the speed of any point
+    /// of the collision geometry per unit joint speed, valid in every
+    /// configuration: a point `p` carried by revolute joint `j` moves at
+    /// `|q̇_j| · dist(p, axis_j) ≤ |q̇_j| · |p − o_j|`, and `|p − o_j|` is at
+    /// most the summed lengths of the fixed joint offsets from `o_j` to
+    /// `p`'s link (plus prismatic travel) plus the link geometry's reach
+    /// from its frame origin (triangle inequality). Prismatic joints: 1.
+    pub fn lever_arms(&self) -> &[f64] {
+        &self.lever_arms
+    }
+
+    /// For every mesh shape: its link, the mesh's triangle count and open
+    /// edges, the hull's vertex count, and [`hull::tightness`] at `spacing`.
+    pub fn hull_tightness(&self, spacing: f64) -> Vec<serde_json::Value> {
+        self.shapes
+            .iter()
+            .filter_map(|s| match &s.geometry {
+                ShapeGeometry::Convex(h) => h.source().map(|mesh| {
+                    serde_json::json!({
+                        "link": s.link_name,
+                        "triangles": mesh.triangles.len(),
+                        "open_edges": mesh.open_edges(),
+                        "hull_vertices": h.vertices().len(),
+                        "allowance_m": h.allowance(),
+                        "tightness": hull::tightness(h, mesh, spacing),
+                    })
+                }),
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// Compute [`Robot::lever_arms`] from the chain and the shapes.
+    pub(crate) fn with_lever_arms(mut self) -> Robot {
+        let n_links = self.link_names.len();
+        let mut reach = vec![0.0f64; n_links];
+        for s in &self.shapes {
+            reach[s.link] = reach[s.link].max(s.geometry.reach_from(&[0.0; 3]));
+        }
+        self.lever_arms = self
+            .dof_step
+            .iter()
+            .map(|&step| match self.steps[step].motion {
+                Motion::Prismatic { .. } => 1.0,
+                _ => {
+                    let mut chain = 0.0;
+                    let mut best: f64 = reach[step + 1];
+                    for k in step + 1..self.steps.len() {
+                        chain += step_length(&self.steps[k], &self.limits);
+                        best = best.max(chain + reach[k + 1]);
+                    }
+                    best
+                }
+            })
+            .collect();
+        self
     }
 
     /// Replace the home configuration (validated: length, finite, within
@@ -178,6 +318,18 @@ impl Robot {
             }
         }
         Ok(())
+    }
+}
+
+/// Largest distance a chain step can move its child frame's origin from its
+/// parent's (fixed offset plus prismatic travel).
+fn step_length(step: &ChainStep, limits: &[JointLimit]) -> f64 {
+    let offset = step.origin.translation.vector.norm();
+    match step.motion {
+        Motion::Prismatic { dof, .. } => {
+            offset + limits[dof].lower.abs().max(limits[dof].upper.abs())
+        }
+        _ => offset,
     }
 }
 

@@ -12,16 +12,18 @@
 
 use super::chain::{isometry_from_xyz_rpy, ChainStep, Motion};
 use super::collision::{geometry_from_urdf, LinkShape};
+use super::mesh_files::MeshFiles;
 use super::{JointLimit, Robot};
 use crate::{Error, Result};
 use nalgebra::{Isometry3, Unit, Vector3};
 use std::collections::HashMap;
 
-/// Parse URDF text and build the chain from `base` to `tip`.
-pub fn robot_from_str(xml: &str, base: &str, tip: &str) -> Result<Robot> {
+/// Parse URDF text and build the chain from `base` to `tip`; mesh files
+/// are read from `files`.
+pub fn robot_from_str(xml: &str, base: &str, tip: &str, files: &MeshFiles) -> Result<Robot> {
     let model = urdf_rs::read_from_string(xml)
         .map_err(|e| Error::invalid("urdf", format!("malformed URDF: {e}")))?;
-    build(&model, base, tip).map_err(|e| e.within("urdf"))
+    build(&model, base, tip, files).map_err(|e| e.within("urdf"))
 }
 
 /// The link/joint tree of a URDF, indexed by name.
@@ -34,7 +36,7 @@ struct Tree<'a> {
     joints: &'a [urdf_rs::Joint],
 }
 
-fn build(model: &urdf_rs::Robot, base: &str, tip: &str) -> Result<Robot> {
+fn build(model: &urdf_rs::Robot, base: &str, tip: &str, files: &MeshFiles) -> Result<Robot> {
     let tree = Tree::new(model)?;
     for (field, name) in [("base", base), ("tip", tip)] {
         if !tree.links.contains_key(name) {
@@ -71,7 +73,8 @@ fn build(model: &urdf_rs::Robot, base: &str, tip: &str) -> Result<Robot> {
             format!("the chain from \"{base}\" to \"{tip}\" has no revolute or prismatic joint"),
         ));
     }
-    let shapes = collect_shapes(&tree, &link_names)?;
+    let mut warnings = Vec::new();
+    let shapes = collect_shapes(&tree, &link_names, files, &mut warnings)?;
     let home = limits.iter().map(JointLimit::mid).collect();
     Ok(Robot {
         name: model.name.clone(),
@@ -82,7 +85,10 @@ fn build(model: &urdf_rs::Robot, base: &str, tip: &str) -> Result<Robot> {
         dof_step,
         shapes,
         home,
-    })
+        warnings,
+        lever_arms: Vec::new(),
+    }
+    .with_lever_arms())
 }
 
 impl<'a> Tree<'a> {
@@ -220,7 +226,12 @@ fn joint_limit(joint: &urdf_rs::Joint) -> Result<JointLimit> {
 
 /// Collision shapes of every chain link, plus those of side links hanging
 /// off it through fixed joints (moved into the chain link's frame).
-fn collect_shapes(tree: &Tree, link_names: &[String]) -> Result<Vec<LinkShape>> {
+fn collect_shapes(
+    tree: &Tree,
+    link_names: &[String],
+    files: &MeshFiles,
+    warnings: &mut Vec<String>,
+) -> Result<Vec<LinkShape>> {
     let mut shapes = Vec::new();
     for (index, name) in link_names.iter().enumerate() {
         let next_on_chain = link_names.get(index + 1).map(String::as_str);
@@ -231,7 +242,7 @@ fn collect_shapes(tree: &Tree, link_names: &[String]) -> Result<Vec<LinkShape>> 
                 shapes.push(LinkShape {
                     link: index,
                     link_name: name.clone(),
-                    geometry: geometry_from_urdf(&element, collision, &pose)?,
+                    geometry: geometry_from_urdf(&element, collision, &pose, files, warnings)?,
                 });
             }
             for &j in tree
@@ -281,7 +292,7 @@ mod tests {
 
     #[test]
     fn generic_chain_loads_with_side_shapes_moved_onto_the_chain() {
-        let robot = robot_from_str(TWO_LINK, "base", "b").unwrap();
+        let robot = robot_from_str(TWO_LINK, "base", "b", &MeshFiles::None).unwrap();
         assert_eq!(robot.dof(), 2);
         assert_eq!(robot.joint_names(), ["j1", "j2"]);
         assert_eq!(robot.link_names(), ["base", "a", "b"]);
@@ -305,7 +316,7 @@ mod tests {
     }
 
     fn field_of(xml: &str, base: &str, tip: &str) -> String {
-        let e = robot_from_str(xml, base, tip).unwrap_err();
+        let e = robot_from_str(xml, base, tip, &MeshFiles::None).unwrap_err();
         format!("{} | {}", e.field().unwrap_or(""), e)
     }
 

@@ -152,6 +152,10 @@ pub fn geometry_bounds(geometry: &ShapeGeometry) -> Bounds {
             &Vector3::from(*half_extents),
             &super::shape::unit_quaternion(rotation),
         ),
+        ShapeGeometry::Convex(hull) => {
+            let (a, b, r) = hull.bound();
+            Bounds::capsule(&Vector3::from(a), &Vector3::from(b), r)
+        }
     }
 }
 

@@ -12,7 +12,7 @@ use super::broadphase::{geometry_bounds, Bounds};
 use super::distance::{pair_contact, PairContact};
 use super::shape::{CompiledObstacle, Core, RobotPart};
 use super::Scene;
-use crate::robot::{Frames, Robot};
+use crate::robot::{Frames, Robot, ShapeGeometry};
 use nalgebra::{DVector, Point3};
 use serde::Serialize;
 
@@ -78,12 +78,31 @@ pub(crate) fn place_robot(robot: &Robot, frames: &Frames) -> Vec<PlacedShape> {
 /// Robot primitive `index` in the base frame for `frames`.
 fn place_shape(robot: &Robot, frames: &Frames, index: usize) -> PlacedShape {
     let s = &robot.collision_shapes()[index];
-    let world = s.geometry.transformed(&frames.poses[s.link]);
-    PlacedShape {
-        index,
-        bounds: geometry_bounds(&world),
-        core: Core::of_geometry(&world),
-        part: RobotPart::new(&world),
+    let pose = &frames.poses[s.link];
+    match &s.geometry {
+        // A hull stays in its link frame: only its bounding capsule moves.
+        ShapeGeometry::Convex(hull) => {
+            let (a, b, r) = hull.bound();
+            let (a, b) = (
+                (pose * Point3::from(a)).coords,
+                (pose * Point3::from(b)).coords,
+            );
+            PlacedShape {
+                index,
+                bounds: Bounds::capsule(&a, &b, r),
+                core: Core::new(a, b, r),
+                part: RobotPart::placed(&s.geometry, pose),
+            }
+        }
+        other => {
+            let world = other.transformed(pose);
+            PlacedShape {
+                index,
+                bounds: geometry_bounds(&world),
+                core: Core::of_geometry(&world),
+                part: RobotPart::new(&world),
+            }
+        }
     }
 }
 

@@ -2,8 +2,10 @@
 //! witness points and normal, from parry3d's `query::contact` (GJK when
 //! apart, EPA when penetrating).
 
-use super::shape::{from_glam, parry_pose_relative, Part, RobotPart};
-use nalgebra::Vector3;
+use super::shape::{from_glam, parry_pose_relative, to_glam, Part, RobotPart};
+use crate::robot::hull::ConvexHull;
+use nalgebra::{Isometry3, Point3, Vector3};
+use parry3d::query::ClosestPoints;
 
 /// Signed distance and witness points of one robot/obstacle pair.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -19,10 +21,15 @@ pub struct PairContact {
 }
 
 /// Signed distance between `robot` and `part` when below `prediction` (m);
-/// `None` when they are further apart. Both shapes are placed relative to
+/// `None` when they are further apart. The robot part's allowance is
+/// subtracted (its witness point moves out along the normal by as much), so
+/// the distance is a lower bound on the distance to the real link. Both shapes are placed relative to
 /// the robot primitive's origin so that parry's `f32` arithmetic only sees
 /// small coordinates.
 pub fn pair_contact(robot: &RobotPart, part: &Part, prediction: f64) -> Option<PairContact> {
+    if let RobotPart::Convex(hull, link_pose, _) = robot {
+        return hull_contact(hull, link_pose, part, prediction);
+    }
     let (shape, pose) = robot.shape_and_pose();
     let origin = pose.translation.vector;
     let pos1 = parry_pose_relative(pose, &origin);
@@ -32,18 +39,139 @@ pub fn pair_contact(robot: &RobotPart, part: &Part, prediction: f64) -> Option<P
         shape,
         &pos2,
         part.shape.as_ref(),
-        prediction.max(0.0) as f32,
+        (prediction + robot.allowance()).max(0.0) as f32,
     )
     .ok()??;
-    let normal = -from_glam(contact.normal1);
+    let normal = (-from_glam(contact.normal1))
+        .try_normalize(1e-12)
+        .unwrap_or_else(Vector3::z);
     Some(PairContact {
         distance: contact.dist as f64,
         point_robot: from_glam(contact.point1) + origin,
         point_obstacle: from_glam(contact.point2) + origin,
-        normal: normal.try_normalize(1e-12).unwrap_or_else(Vector3::z),
+        normal,
     })
 }
 
+/// A mesh link's hull against an obstacle part, never above the distance
+/// to the mesh: balls and capsules (berries, stems) by the exact `f64`
+/// hull query ([`ConvexHull::segment_contact`]); other parts by a
+/// separating-axis lower bound along the best of the direction between
+/// parry3d's closest points on the hull's *triangles* (accurate, where GJK
+/// on the hull's whole point cloud can err by a centimetre) and the hull's
+/// face normals. The hull's allowance is subtracted in both cases.
+fn hull_contact(
+    hull: &ConvexHull,
+    link_pose: &Isometry3<f64>,
+    part: &Part,
+    prediction: f64,
+) -> Option<PairContact> {
+    let allowance = hull.allowance();
+    if part.shape.as_ball().is_some() || part.shape.as_capsule().is_some() {
+        let to_link = link_pose.inverse();
+        let a = (to_link * Point3::from(part.core.a)).coords;
+        let b = (to_link * Point3::from(part.core.b)).coords;
+        let c = hull.segment_contact(&a, &b);
+        let distance = c.distance - part.core.radius - allowance;
+        if distance >= prediction {
+            return None;
+        }
+        let normal = link_pose.rotation * c.normal;
+        return Some(PairContact {
+            distance,
+            point_robot: (link_pose * Point3::from(c.point_hull)).coords - normal * allowance,
+            point_obstacle: (link_pose * Point3::from(c.point_segment)).coords
+                + normal * part.core.radius,
+            normal,
+        });
+    }
+    let shape_pose = link_pose * hull.frame();
+    let origin = shape_pose.translation.vector;
+    let pos1 = parry_pose_relative(&shape_pose, &origin);
+    let pos2 = parry_pose_relative(&part.pose, &origin);
+    let limit = (prediction + allowance).max(0.0) as f32;
+    let near = parry3d::query::closest_points(
+        &pos1,
+        hull.surface_mesh().as_ref(),
+        &pos2,
+        part.shape.as_ref(),
+        limit,
+    )
+    .ok()?;
+    let inside = hull.plane_distance(
+        &(link_pose.inverse() * Point3::from(part.core.a))
+            .coords
+            .into(),
+    ) <= 0.0;
+    let (guess, witnesses) = match near {
+        ClosestPoints::Disjoint if !inside => return None,
+        ClosestPoints::WithinMargin(p1, p2) if !inside => {
+            let (p1, p2) = (from_glam(p1) + origin, from_glam(p2) + origin);
+            ((p1 - p2).try_normalize(1e-12), Some((p1, p2)))
+        }
+        _ => (None, None),
+    };
+    let (normal, separation) =
+        best_separating_axis(hull, link_pose, part, guess.unwrap_or_else(Vector3::z));
+    let distance = separation - allowance;
+    if distance >= prediction {
+        return None;
+    }
+    let (point_robot, point_obstacle) = witnesses.unwrap_or_else(|| {
+        let c = part.core.a;
+        (c + normal * separation, c)
+    });
+    Some(PairContact {
+        distance,
+        point_robot: point_robot - normal * allowance,
+        point_obstacle,
+        normal,
+    })
+}
+
+/// The largest separation `min_{y ∈ part} u·y − max_{x ∈ hull} u·x` over
+/// the candidate axes `u` pointing from the hull to the part (parry's
+/// direction and the hull's outward face normals), with the normal from the
+/// part towards the hull (`-u`). Every such separation is a lower bound on
+/// the signed distance (which is their maximum over all directions).
+fn best_separating_axis(
+    hull: &ConvexHull,
+    link_pose: &Isometry3<f64>,
+    part: &Part,
+    parry_normal: Vector3<f64>,
+) -> (Vector3<f64>, f64) {
+    let Some(support) = part.shape.as_support_map() else {
+        return (parry_normal, f64::NEG_INFINITY);
+    };
+    let origin = part.pose.translation.vector;
+    let part_pose = parry_pose_relative(&part.pose, &origin);
+    let part_min = |u: &Vector3<f64>| -> f64 {
+        let s = from_glam(support.support_point(&part_pose, to_glam(&-u))) + origin;
+        u.dot(&s)
+    };
+    let hull_max = |u: &Vector3<f64>| -> f64 {
+        let local = link_pose.rotation.inverse() * u;
+        let top = hull
+            .vertices()
+            .iter()
+            .map(|v| local.dot(&Vector3::from(*v)))
+            .fold(f64::NEG_INFINITY, f64::max);
+        top + u.dot(&link_pose.translation.vector)
+    };
+    let u0 = -parry_normal;
+    let mut best = (parry_normal, part_min(&u0) - hull_max(&u0));
+    for (n, d) in hull.planes() {
+        if d.is_infinite() {
+            continue;
+        }
+        let u = link_pose.rotation * n;
+        let sep = part_min(&u) - (d + u.dot(&link_pose.translation.vector));
+        if sep > best.1 {
+            best = (-u, sep);
+        }
+    }
+    best
+}
 /// Distance from `p` to the part (0 inside).
 pub fn point_distance(part: &Part, p: &Vector3<f64>) -> f64 {
     let origin = part.pose.translation.vector;

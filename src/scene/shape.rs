@@ -6,6 +6,7 @@
 
 use super::broadphase::Bounds;
 use super::obstacle::ObstacleShape;
+use crate::robot::hull::ConvexHull;
 use crate::robot::ShapeGeometry;
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use parry3d::shape::{Ball, Capsule, ConvexPolyhedron, Cuboid, Cylinder, SharedShape};
@@ -204,6 +205,10 @@ impl Core {
                 let c = Vector3::from(*center);
                 Core::new(c, c, Vector3::from(*half_extents).norm())
             }
+            ShapeGeometry::Convex(hull) => {
+                let (a, b, r) = hull.bound();
+                Core::new(Vector3::from(a), Vector3::from(b), r)
+            }
         }
     }
 
@@ -225,12 +230,29 @@ pub enum RobotPart {
     Capsule(Capsule, Isometry3<f64>),
     /// Box about the pose origin.
     Cuboid(Cuboid, Isometry3<f64>),
+    /// A mesh link's convex hull (shared), the link's pose, and the pose of
+    /// the hull's parry shape ([`crate::robot::hull`]).
+    Convex(ConvexHull, Isometry3<f64>, Isometry3<f64>),
 }
 
 impl RobotPart {
+    /// Build from a link-frame primitive and the link's pose; a hull keeps
+    /// its shared parry shape and only composes the pose.
+    pub fn placed(geometry: &ShapeGeometry, link_pose: &Isometry3<f64>) -> RobotPart {
+        match geometry {
+            ShapeGeometry::Convex(hull) => {
+                RobotPart::Convex(hull.clone(), *link_pose, link_pose * hull.frame())
+            }
+            other => RobotPart::new(&other.transformed(link_pose)),
+        }
+    }
+
     /// Build from a base-frame primitive.
     pub fn new(geometry: &ShapeGeometry) -> RobotPart {
         match geometry {
+            ShapeGeometry::Convex(hull) => {
+                RobotPart::Convex(hull.clone(), Isometry3::identity(), *hull.frame())
+            }
             ShapeGeometry::Sphere { center, radius } => RobotPart::Ball(
                 Ball::new(*radius as f32),
                 Isometry3::translation(center[0], center[1], center[2]),
@@ -263,6 +285,16 @@ impl RobotPart {
             RobotPart::Ball(s, p) => (s, p),
             RobotPart::Capsule(s, p) => (s, p),
             RobotPart::Cuboid(s, p) => (s, p),
+            RobotPart::Convex(hull, _, p) => (hull.shape().as_ref(), p),
+        }
+    }
+
+    /// Distance (m) to subtract from parry's distance to this part so that
+    /// it never exceeds the distance to the link's real geometry.
+    pub fn allowance(&self) -> f64 {
+        match self {
+            RobotPart::Convex(hull, _, _) => hull.allowance(),
+            _ => 0.0,
         }
     }
 }
