@@ -5,7 +5,7 @@
 //! `TriMesh` for capsules and boxes), while staying within the claimed
 //! tightness.
 
-use dpmp::robot::hull::{tightness, ConvexHull, GJK_ALLOWANCE_M};
+use dpmp::robot::hull::{tightness, ConvexHull, ROUNDING_ALLOWANCE_M};
 use dpmp::robot::hull_query::segment_triangle_distance;
 use dpmp::robot::mesh::TriangleMesh;
 use dpmp::robot::{Robot, ShapeGeometry};
@@ -51,7 +51,7 @@ fn every_mesh_triangle_is_inside_its_hull_exactly_and_by_dense_sampling() {
             .map(|v| hull.plane_distance(v))
             .fold(f64::NEG_INFINITY, f64::max);
         assert!(
-            worst_vertex <= hull.allowance() - GJK_ALLOWANCE_M + 1e-15,
+            worst_vertex <= hull.allowance() - ROUNDING_ALLOWANCE_M + 1e-15,
             "{name}: a vertex is {worst_vertex} m outside"
         );
         assert!(worst_vertex < 1e-6, "{name}: f32 rounding above 1 µm");
@@ -63,7 +63,7 @@ fn every_mesh_triangle_is_inside_its_hull_exactly_and_by_dense_sampling() {
             .map(|p| hull.plane_distance(p))
             .fold(f64::NEG_INFINITY, f64::max);
         assert!(
-            worst_sample <= hull.allowance() - GJK_ALLOWANCE_M + 1e-12,
+            worst_sample <= hull.allowance() - ROUNDING_ALLOWANCE_M + 1e-12,
             "{name}: a face point is {worst_sample} m outside"
         );
     }

@@ -13,19 +13,22 @@
 //! relative to their centroid (coordinates of a few decimetres, rounding
 //! about 2e-8 m), its containment of every mesh vertex is re-checked in
 //! `f64` against the hull's face planes at load, and the measured excess
-//! plus [`GJK_ALLOWANCE_M`] becomes the hull's [`ConvexHull::allowance`]: every
-//! distance reported against the hull is reduced by it, so the reported
-//! clearance never exceeds the distance to the mesh.
+//! plus [`ROUNDING_ALLOWANCE_M`] becomes the hull's
+//! [`ConvexHull::allowance`]: every distance reported against the hull is
+//! reduced by it, so the reported clearance never exceeds the distance to
+//! the mesh. The distances themselves are computed in `f64`
+//! ([`super::hull_query`]), not by parry3d's GJK on the hull's point cloud.
 
 use super::mesh::TriangleMesh;
 use nalgebra::{Point3, Vector3};
 use parry3d::shape::ConvexPolyhedron;
 use std::sync::Arc;
 
-/// Allowance for parry3d's `f32` GJK/EPA distance error (m). Measured
-/// errors against exact `f64` point-triangle distances stay below 2e-6 m
-/// (tests/robot_collision_mesh.rs); this is five times that.
-pub const GJK_ALLOWANCE_M: f64 = 1e-5;
+/// Base allowance (m) subtracted from every distance to a hull, on top of
+/// the hull's measured `f32` rounding: it covers the `f32` arithmetic left
+/// in the queries (parry3d's closest points on the hull's triangles and
+/// the obstacles' `f32` support points), which stays below 1e-6 m.
+pub const ROUNDING_ALLOWANCE_M: f64 = 1e-5;
 
 /// A convex hull in its link's frame, with what the clearance queries need:
 /// the parry3d shape, a bounding capsule for the broad phase, and the
@@ -124,7 +127,7 @@ impl ConvexHull {
             frame: nalgebra::Isometry3::translation(centre[0], centre[1], centre[2]),
             shape: Arc::new(shape),
             surface: Arc::new(surface),
-            allowance: GJK_ALLOWANCE_M,
+            allowance: ROUNDING_ALLOWANCE_M,
             source: None,
             planes: Vec::new(),
         };
@@ -175,7 +178,7 @@ impl ConvexHull {
     }
 
     /// Distance (m) subtracted from every distance measured against the
-    /// hull: [`GJK_ALLOWANCE_M`] plus how far, in `f64`, any point the hull
+    /// hull: [`ROUNDING_ALLOWANCE_M`] plus how far, in `f64`, any point the hull
     /// was built from lies outside its face planes (parry's `f32` rounding).
     pub fn allowance(&self) -> f64 {
         self.0.allowance
@@ -325,14 +328,8 @@ fn bounding_capsule(points: &[[f64; 3]]) -> ([f64; 3], [f64; 3], f64) {
 
 /// Distance from `p` to the segment `a`–`b`.
 pub fn point_segment_distance(p: &Vector3<f64>, a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
-    let ab = b - a;
-    let len2 = ab.norm_squared();
-    let t = if len2 > 0.0 {
-        ((p - a).dot(&ab) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (p - (a + ab * t)).norm()
+    let (_, y) = super::hull_query::closest_segments(p, p, a, b);
+    (y - p).norm()
 }
 
 fn dist(a: &[f64; 3], b: &[f64; 3]) -> f64 {
@@ -478,7 +475,10 @@ mod tests {
         assert!((hull.signed_distance(&[1.3, 0.0, 0.0]) - 0.2).abs() < 1e-7);
         let corner = hull.signed_distance(&[1.2, 0.2, 0.2]);
         assert!((corner - 0.1 * 3f64.sqrt()).abs() < 1e-7, "{corner}");
-        assert!(hull.allowance() >= GJK_ALLOWANCE_M && hull.allowance() < GJK_ALLOWANCE_M + 1e-7);
+        assert!(
+            hull.allowance() >= ROUNDING_ALLOWANCE_M
+                && hull.allowance() < ROUNDING_ALLOWANCE_M + 1e-7
+        );
         let (a, b, r) = hull.bound();
         for v in cube(0.1) {
             let d = point_segment_distance(&Vector3::from(v), &a.into(), &b.into());

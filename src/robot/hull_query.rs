@@ -170,7 +170,7 @@ pub fn closest_segments(
 ) -> (Vector3<f64>, Vector3<f64>) {
     let (d1, d2, r) = (q1 - p1, q2 - p2, p1 - p2);
     let (a, e, f) = (d1.norm_squared(), d2.norm_squared(), d2.dot(&r));
-    const EPS: f64 = 1e-24;
+    const EPS: f64 = 1e-18;
     let (s, t) = if a <= EPS && e <= EPS {
         (0.0, 0.0)
     } else if a <= EPS {

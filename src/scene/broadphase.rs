@@ -1,6 +1,7 @@
 //! The broad phase: axis-aligned bounding boxes in f64 and the gap between
 //! two of them, a lower bound on the distance between what they bound.
 
+use crate::robot::hull_query::closest_segments;
 use crate::robot::ShapeGeometry;
 use nalgebra::{UnitQuaternion, Vector3};
 
@@ -91,49 +92,15 @@ impl Bounds {
 }
 
 /// Distance between the segments `p1`–`q1` and `p2`–`q2` (closest points
-/// by clamped parameters, after Ericson, *Real-Time Collision Detection*
-/// 5.1.9); points are segments of zero length.
+/// from [`closest_segments`]); points are segments of zero length.
 pub fn segment_distance(
     p1: &Vector3<f64>,
     q1: &Vector3<f64>,
     p2: &Vector3<f64>,
     q2: &Vector3<f64>,
 ) -> f64 {
-    const EPS: f64 = 1e-18;
-    let d1 = q1 - p1;
-    let d2 = q2 - p2;
-    let r = p1 - p2;
-    let a = d1.dot(&d1);
-    let e = d2.dot(&d2);
-    let f = d2.dot(&r);
-    let (s, t) = if a <= EPS && e <= EPS {
-        (0.0, 0.0)
-    } else if a <= EPS {
-        (0.0, (f / e).clamp(0.0, 1.0))
-    } else {
-        let c = d1.dot(&r);
-        if e <= EPS {
-            ((-c / a).clamp(0.0, 1.0), 0.0)
-        } else {
-            let b = d1.dot(&d2);
-            let denom = a * e - b * b;
-            let mut s = if denom > EPS {
-                ((b * f - c * e) / denom).clamp(0.0, 1.0)
-            } else {
-                0.0
-            };
-            let mut t = (b * s + f) / e;
-            if t < 0.0 {
-                t = 0.0;
-                s = (-c / a).clamp(0.0, 1.0);
-            } else if t > 1.0 {
-                t = 1.0;
-                s = ((b - c) / a).clamp(0.0, 1.0);
-            }
-            (s, t)
-        }
-    };
-    ((p1 + d1 * s) - (p2 + d2 * t)).norm()
+    let (x, y) = closest_segments(p1, q1, p2, q2);
+    (x - y).norm()
 }
 
 /// Bounds of a robot primitive already expressed in the base frame.
