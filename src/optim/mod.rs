@@ -23,6 +23,7 @@
 //! Determinism: the same request gives the same response bytes except for
 //! the wall-clock `solve_ms` fields.
 
+pub mod continuous;
 pub mod diagnose;
 mod evaluate;
 pub mod example;

@@ -344,7 +344,9 @@ impl Problem {
         let tol = FEASIBILITY_TOLERANCE;
         let clear_ok = report
             .min_clearance_m
-            .is_none_or(|d| d >= self.clearance_m - tol);
+            .into_iter()
+            .chain(report.continuous_clearance_m)
+            .all(|d| d >= self.clearance_m - tol);
         let goal_ok = match (&self.goal, report.goal_error_m) {
             (Some(g), Some(e)) => e <= g.tolerance_m + tol,
             (Some(_), None) => false,

@@ -57,6 +57,14 @@ pub struct TrajectoryReport {
     pub min_clearance_m: Option<f64>,
     /// Where that distance occurs.
     pub closest: Option<Closest>,
+    /// Lower bound (m) on the clearance over the whole continuous motion,
+    /// between the verification samples too ([`super::continuous`]);
+    /// `None` without obstacles. `optimal` requires it to meet
+    /// `clearance_m`.
+    pub continuous_clearance_m: Option<f64>,
+    /// Largest bound (m) on how far the robot can approach an obstacle
+    /// between two accepted samples (half their displacement bound).
+    pub continuous_margin_m: Option<f64>,
     /// Largest excursion beyond the joint limits minus the requested margin
     /// (rad, 0 when inside).
     pub max_joint_limit_violation_rad: f64,

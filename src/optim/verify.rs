@@ -1,6 +1,8 @@
 //! Dense verification: every constraint evaluated at `verify_factor` times
-//! the optimisation sampling, with real forward kinematics and parry3d
-//! distances. The report the user sees always comes from here.
+//! the optimisation sampling, with real forward kinematics and distances to
+//! the robot's mesh hulls, plus the continuous-motion clearance bound
+//! between the samples ([`super::continuous`]). The report the user sees
+//! always comes from here.
 
 use super::problem::{Problem, FEASIBILITY_TOLERANCE};
 use super::report::{Closest, JointTrajectory, TrajectoryPoint, TrajectoryReport};
@@ -49,10 +51,14 @@ impl Problem {
         let mut flagged = vec![false; self.dense_phases.len()];
         let limit = self.limit_violation(&q, &mut flagged);
         let ratio = self.velocity_ratio(&qd, &mut flagged);
-        let (min_clearance, closest) = self.dense_clearance(&q, &mut flagged);
+        let (min_clearance, closest, per_phase) = self.dense_clearance(&q, &mut flagged);
+        let certificate =
+            min_clearance.map(|_| self.continuous_certificate(&wm, &q, &qd, &per_phase));
         let report = TrajectoryReport {
             min_clearance_m: min_clearance,
             closest,
+            continuous_clearance_m: certificate.as_ref().map(|c| c.clearance_m),
+            continuous_margin_m: certificate.as_ref().map(|c| c.margin_m),
             max_joint_limit_violation_rad: limit,
             max_velocity_ratio: ratio,
             goal_error_m: self.goal_error(w),
@@ -64,12 +70,16 @@ impl Problem {
                 .max(0.0),
             ..Default::default()
         };
-        let flagged = flagged
+        let mut flagged: Vec<f64> = flagged
             .iter()
             .zip(&self.dense_phases)
             .filter(|(f, _)| **f)
             .map(|(_, p)| *p)
             .collect();
+        if let Some(c) = certificate {
+            flagged.extend(c.flagged);
+            flagged.sort_by(f64::total_cmp);
+        }
         Verification { report, flagged }
     }
 
@@ -103,14 +113,16 @@ impl Problem {
     }
 
     /// Closest pair per dense phase (pairs within the activation distance
-    /// via the broad phase; the exact minimum when nothing is that close).
+    /// via the broad phase; the exact minimum when nothing is that close):
+    /// the minimum, where it occurs, and each phase's distance (`None`: at
+    /// least the activation distance).
     fn dense_clearance(
         &self,
         q: &DMatrix<f64>,
         flagged: &mut [bool],
-    ) -> (Option<f64>, Option<Closest>) {
+    ) -> (Option<f64>, Option<Closest>, Vec<Option<f64>>) {
         if self.scene.is_empty() {
-            return (None, None);
+            return (None, None, Vec::new());
         }
         let rows: Vec<Vec<f64>> = (0..q.nrows())
             .map(|p| q.row(p).iter().cloned().collect())
@@ -146,8 +158,12 @@ impl Problem {
                 }
             }
         }
+        let distances = per_phase
+            .iter()
+            .map(|c| c.as_ref().map(|c| c.distance))
+            .collect();
         match best {
-            None => (None, None),
+            None => (None, None, distances),
             Some((p, c)) => (
                 Some(c.distance),
                 Some(Closest {
@@ -155,6 +171,7 @@ impl Problem {
                     obstacle: c.obstacle_id(&self.scene).to_string(),
                     time_s: self.dense_phases[p] * self.duration,
                 }),
+                distances,
             ),
         }
     }
