@@ -331,3 +331,84 @@ fn reported_clearance_never_exceeds_the_exact_mesh_distance() {
          {worst_under:.3e} m (balls, capsules), {worst_box:.3e} m (boxes)"
     );
 }
+
+#[test]
+fn a_berry_at_the_hands_flat_face_is_never_cleared_as_optimal() {
+    use dpmp::optim::example::{typical_request, ExampleSettings};
+    use dpmp::optim::{optimize, Status};
+    let robot = Robot::panda().unwrap();
+    let settings = ExampleSettings {
+        n_obstacles: 0,
+        with_goal: false,
+        ..Default::default()
+    };
+    let mut req = typical_request(&robot, 4, &settings).unwrap();
+    let problem = req.validate(&robot).unwrap();
+    let mean = match &req.prior {
+        dpmp::optim::PriorSpec::Full { mean, .. } => mean.clone(),
+        _ => unreachable!(),
+    };
+    let trajectory = problem.trajectory(&mean);
+    let q_end = trajectory.points.last().unwrap().positions.clone();
+    // The middle of the hand mesh's largest triangle: far from any vertex.
+    let hand = robot.link_index("panda_hand").unwrap();
+    let (_, hull) = mesh_links(&robot)
+        .into_iter()
+        .find(|(l, _)| *l == hand)
+        .unwrap();
+    let mesh = hull.source().unwrap();
+    let area = |t: &[[f64; 3]; 3]| {
+        let [a, b, c] = t.map(Vector3::from);
+        (b - a).cross(&(c - a)).norm()
+    };
+    let face = mesh
+        .triangles
+        .iter()
+        .max_by(|x, y| area(x).total_cmp(&area(y)))
+        .unwrap();
+    let [a, b, c] = face.map(Vector3::from);
+    let centroid = (a + b + c) / 3.0;
+    let mut n = (b - a).cross(&(c - a)).normalize();
+    if hull.plane_distance(&(centroid + n * 0.002).into()) < 0.0 {
+        n = -n;
+    }
+    let nearest_vertex = mesh
+        .vertices()
+        .iter()
+        .map(|v| (Vector3::from(*v) - centroid).norm())
+        .fold(f64::INFINITY, f64::min);
+    assert!(nearest_vertex > 0.02, "{nearest_vertex}");
+    // A berry whose surface is half the clearance away from the face.
+    let radius = 0.012;
+    let pose = robot.fk(&q_end).poses[hand];
+    let centre = (pose * Point3::from(centroid + n * (radius + 0.5 * req.clearance_m))).coords;
+    req.obstacles = vec![Obstacle {
+        id: "berry".into(),
+        shape: ObstacleShape::Sphere {
+            center: centre.into(),
+            radius,
+        },
+    }];
+    let problem = req.validate(&robot).unwrap();
+    let report = problem.evaluate(&mean);
+    let reported = report.min_clearance_m.unwrap();
+    assert!(reported < req.clearance_m, "{report:?}");
+    assert!(!problem.is_feasible(&report));
+    let resp = optimize(&req, &robot).unwrap();
+    if resp.status == Status::Optimal {
+        // Whatever is returned as optimal clears the berry by the exact mesh
+        // distance at every one of 2000 phases.
+        let dense = problem.basis().resampled(2000).unwrap();
+        let nb = dense.n_basis();
+        let wm = nalgebra::DMatrix::from_fn(nb, 7, |i, j| resp.weights[j * nb + i]);
+        let q = dense.matrix() * wm;
+        for k in 0..q.nrows() {
+            let qk: Vec<f64> = q.row(k).iter().copied().collect();
+            let p = robot.fk(&qk).poses[hand];
+            let local = p.inverse() * Point3::from(centre);
+            let exact = mesh.distance_to_point(&local.coords.into()) - radius;
+            assert!(exact >= req.clearance_m - 1e-6, "phase {k}: {exact}");
+        }
+        assert_ne!(resp.weights, mean);
+    }
+}

@@ -200,7 +200,7 @@ pub fn geometry_from_urdf(
             let open = mesh.open_edges();
             if open > 0 {
                 warnings.push(format!(
-                    "{field}: mesh '{filename}' is not closed ({open} edges not shared by exactly \
+                    "urdf.{field}: mesh '{filename}' is not closed ({open} edges not shared by exactly \
                      two triangles); its convex hull is used and contains it all the same"
                 ));
             }

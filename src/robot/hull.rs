@@ -49,6 +49,8 @@ struct HullData {
     source: Option<Arc<TriangleMesh>>,
     /// Outward unit normal and offset of every face (`n·x ≤ d` inside).
     planes: Vec<(Vector3<f64>, f64)>,
+    /// Centroid and radius of a ball around every face (pruning).
+    face_balls: Vec<(Vector3<f64>, f64)>,
 }
 
 impl PartialEq for ConvexHull {
@@ -130,8 +132,10 @@ impl ConvexHull {
             allowance: ROUNDING_ALLOWANCE_M,
             source: None,
             planes: Vec::new(),
+            face_balls: Vec::new(),
         };
         hull.planes = face_planes(&hull.vertices, &hull.faces);
+        hull.face_balls = face_balls(&hull.vertices, &hull.faces);
         let excess = points
             .iter()
             .map(|p| max_plane_distance(&hull.planes, p))
@@ -218,7 +222,18 @@ impl ConvexHull {
                     (n2, d + n2.dot(&pose.translation.vector))
                 })
                 .collect(),
+            face_balls: self
+                .0
+                .face_balls
+                .iter()
+                .map(|(c, r)| ((pose * Point3::from(*c)).coords, *r))
+                .collect(),
         }))
+    }
+
+    /// A ball `(centre, radius)` around every face, in face order.
+    pub fn face_balls(&self) -> &[(Vector3<f64>, f64)] {
+        &self.0.face_balls
     }
 
     /// Outward unit normal and offset `(n, d)` of every face, in the order
@@ -280,6 +295,19 @@ fn face_planes(vertices: &[[f64; 3]], faces: &[[u32; 3]]) -> Vec<(Vector3<f64>, 
                 Some(n) => (n, n.dot(&a)),
                 None => (Vector3::zeros(), f64::INFINITY),
             }
+        })
+        .collect()
+}
+
+/// Centroid of every face and the largest distance from it to a corner.
+fn face_balls(vertices: &[[f64; 3]], faces: &[[u32; 3]]) -> Vec<(Vector3<f64>, f64)> {
+    faces
+        .iter()
+        .map(|f| {
+            let corners = f.map(|i| Vector3::from(vertices[i as usize]));
+            let c = (corners[0] + corners[1] + corners[2]) / 3.0;
+            let r = corners.iter().map(|v| (v - c).norm()).fold(0.0, f64::max);
+            (c, r * (1.0 + 1e-12))
         })
         .collect()
 }

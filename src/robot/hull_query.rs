@@ -5,8 +5,10 @@
 //! - Separated: the segment is clipped against every face plane; when
 //!   nothing is left, the distance is the smallest segment-triangle
 //!   distance over the faces that can see the segment (a face whose plane
-//!   has the whole segment behind it cannot hold the closest point), tried
-//!   from the most promising face with a lower-bound prune. Exact.
+//!   has the whole segment behind it cannot hold the closest point),
+//!   starting from the face of largest separation and skipping faces whose
+//!   lower bound (plane distance, distance to a ball around the face)
+//!   already reaches the best distance found. Exact.
 //! - Overlapping: the separating-axis bound `max_f min_{y ∈ segment}
 //!   (n_f·y − d_f)` over the face normals, a lower bound on the signed
 //!   distance (the true signed distance is the maximum of the separation
@@ -68,37 +70,47 @@ impl ConvexHull {
         }
     }
 
+    /// Exact distance for a segment outside the hull: starting from the
+    /// face of largest separation, every face that can see the segment is
+    /// tried unless a lower bound on its distance (its plane distance, then
+    /// the distance to a ball around it) already reaches the best found.
     fn separated(&self, a: &Vector3<f64>, b: &Vector3<f64>, first: usize) -> HullContact {
         let vertices = self.vertices();
-        let mut best = (f64::INFINITY, Vector3::zeros(), Vector3::zeros());
-        let visit = |f: usize, best: &mut (f64, Vector3<f64>, Vector3<f64>)| {
-            let [p, q, r] = self.faces()[f].map(|i| Vector3::from(vertices[i as usize]));
-            let (x, y) = segment_triangle_closest(a, b, &p, &q, &r);
-            let dist = (y - x).norm();
-            if dist < best.0 {
-                *best = (dist, x, y);
-            }
-        };
-        visit(first, &mut best);
-        for (f, (n, d)) in self.planes().iter().enumerate() {
+        let triangle = |f: usize| self.faces()[f].map(|i| Vector3::from(vertices[i as usize]));
+        let [p, q, r] = triangle(first);
+        let (x, y) = segment_triangle_closest(a, b, &p, &q, &r);
+        let mut best = ((y - x).norm(), x, y, first);
+        for (f, ((n, d), (centre, radius))) in
+            self.planes().iter().zip(self.face_balls()).enumerate()
+        {
             let (da, db) = (n.dot(a) - d, n.dot(b) - d);
-            let lower = if da > 0.0 && db > 0.0 {
+            let plane = if da > 0.0 && db > 0.0 {
                 da.min(db)
             } else {
                 0.0
             };
-            if f != first && da.max(db) > 0.0 && lower < best.0 {
-                visit(f, &mut best);
+            if f == first || da.max(db) <= 0.0 || plane >= best.0 {
+                continue;
+            }
+            let (_, near) = closest_segments(centre, centre, a, b);
+            if (near - centre).norm() - radius >= best.0 {
+                continue;
+            }
+            let [p, q, r] = triangle(f);
+            let (x, y) = segment_triangle_closest(a, b, &p, &q, &r);
+            let dist = (y - x).norm();
+            if dist < best.0 {
+                best = (dist, x, y, f);
             }
         }
-        let (distance, x, y) = best;
+        let (distance, x, y, face) = best;
         HullContact {
             distance,
             point_hull: x,
             point_segment: y,
             normal: (x - y)
                 .try_normalize(1e-15)
-                .unwrap_or_else(|| -self.planes()[first].0),
+                .unwrap_or_else(|| -self.planes()[face].0),
         }
     }
 }
