@@ -197,7 +197,7 @@ fn bad_meshes_are_errors_naming_the_element_and_the_file() {
         format!(r#"<geometry><mesh filename="{file}"{scale}/></geometry>"#)
     };
     let expect = |robot: Result<Robot, String>, words: &[&str]| {
-        let e = robot.err().expect("an error");
+        let e = robot.expect_err("an error");
         assert!(
             e.contains("urdf.link[panda_hand].collision[0].geometry.mesh"),
             "{e}"
