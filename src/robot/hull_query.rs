@@ -40,6 +40,19 @@ impl ConvexHull {
     /// Signed distance and witnesses between the hull and the segment
     /// `a`–`b` (hull frame).
     pub fn segment_contact(&self, a: &Vector3<f64>, b: &Vector3<f64>) -> HullContact {
+        self.segment_contact_within(a, b, f64::INFINITY)
+            .unwrap_or_else(|| self.separated(a, b, 0))
+    }
+
+    /// [`ConvexHull::segment_contact`] when the distance is below `limit`;
+    /// `None` as soon as one face plane separates the segment by `limit` or
+    /// more (a lower bound on the distance), without the rest of the work.
+    pub fn segment_contact_within(
+        &self,
+        a: &Vector3<f64>,
+        b: &Vector3<f64>,
+        limit: f64,
+    ) -> Option<HullContact> {
         let planes = self.planes();
         let mut best_face = 0;
         let mut best_sep = f64::NEG_INFINITY;
@@ -47,6 +60,9 @@ impl ConvexHull {
         for (f, (n, d)) in planes.iter().enumerate() {
             let (da, db) = (n.dot(a) - d, n.dot(b) - d);
             let sep = da.min(db);
+            if sep >= limit {
+                return None;
+            }
             if sep > best_sep {
                 best_sep = sep;
                 best_face = f;
@@ -54,9 +70,9 @@ impl ConvexHull {
             clip(da, db, &mut t_lo, &mut t_hi);
         }
         if t_lo <= t_hi && best_sep <= 0.0 {
-            return self.overlap(a, b, best_face, best_sep);
+            return Some(self.overlap(a, b, best_face, best_sep));
         }
-        self.separated(a, b, best_face)
+        Some(self.separated(a, b, best_face))
     }
 
     fn overlap(&self, a: &Vector3<f64>, b: &Vector3<f64>, face: usize, sep: f64) -> HullContact {

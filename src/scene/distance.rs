@@ -71,7 +71,8 @@ fn hull_contact(
         let to_link = link_pose.inverse();
         let a = (to_link * Point3::from(part.core.a)).coords;
         let b = (to_link * Point3::from(part.core.b)).coords;
-        let c = hull.segment_contact(&a, &b);
+        let limit = prediction + part.core.radius + allowance;
+        let c = hull.segment_contact_within(&a, &b, limit)?;
         let distance = c.distance - part.core.radius - allowance;
         if distance >= prediction {
             return None;
