@@ -94,7 +94,7 @@ impl ConvexHull {
                 )
             })
             .collect();
-        let (hull_points, faces) =
+        let (hull_points, mut faces) =
             parry3d::transformation::try_convex_hull(&local).map_err(|e| {
                 format!(
                     "no convex hull of its {} vertices ({e:?}): the mesh must be a solid, not flat",
@@ -111,6 +111,9 @@ impl ConvexHull {
                 ]
             })
             .collect();
+        // Largest faces first: they separate most obstacles, so the queries'
+        // early exit ([`ConvexHull::segment_contact_within`]) comes sooner.
+        sort_faces_by_area(&vertices, &mut faces);
         let volume = enclosed_volume(&vertices, &faces);
         if volume.abs() < 1e-12 {
             return Err(format!(
@@ -297,6 +300,15 @@ fn face_planes(vertices: &[[f64; 3]], faces: &[[u32; 3]]) -> Vec<(Vector3<f64>, 
             }
         })
         .collect()
+}
+
+/// Order `faces` by decreasing area (stable: ties keep parry's order).
+fn sort_faces_by_area(vertices: &[[f64; 3]], faces: &mut [[u32; 3]]) {
+    let area = |f: &[u32; 3]| {
+        let [a, b, c] = f.map(|i| Vector3::from(vertices[i as usize]));
+        (b - a).cross(&(c - a)).norm()
+    };
+    faces.sort_by(|x, y| area(y).total_cmp(&area(x)));
 }
 
 /// Centroid of every face and the largest distance from it to a corner.
