@@ -6,11 +6,15 @@
 //! `cargo bench --bench optim` (set `DPMP_BENCH_PROBLEMS` to change the
 //! number of problems, default 100; `DPMP_BENCH_RESTARTS` to override
 //! `options.restarts`, e.g. 0 for the run from the prior mean alone;
-//! `DPMP_BENCH_SWEEP_ONLY=1` skips the criterion part).
+//! `DPMP_BENCH_SWEEP_ONLY=1` skips the criterion part). The sweep runs
+//! twice in one process, so the ratio holds on a noisy machine: with the
+//! default inner solver (the dual active-set method) and with
+//! `inner_solver: clarabel` (every QP by Clarabel); `DPMP_BENCH_INNER=
+//! active_set` or `clarabel` runs one of them only.
 
 use criterion::{black_box, Criterion};
 use dpmp::optim::example::{typical_request, ExampleSettings};
-use dpmp::optim::{optimize, OptimizeRequest, SolveControl, Status};
+use dpmp::optim::{optimize, InnerSolver, OptimizeRequest, SolveControl, Status};
 use dpmp::robot::Robot;
 use std::time::Instant;
 
@@ -56,7 +60,16 @@ fn peak_rss_mb() -> f64 {
         .map_or(f64::NAN, |kb| kb / 1024.0)
 }
 
-fn sweep(robot: &Robot, requests: &[OptimizeRequest]) {
+fn sweep(robot: &Robot, requests: &[OptimizeRequest], inner: InnerSolver) {
+    let requests: Vec<OptimizeRequest> = requests
+        .iter()
+        .map(|r| {
+            let mut r = r.clone();
+            r.options.inner_solver = inner;
+            r
+        })
+        .collect();
+    let mut active_set_steps = Vec::new();
     let mut solve_ms = Vec::new();
     let mut total_ms = Vec::new();
     let mut iterations = Vec::new();
@@ -65,7 +78,7 @@ fn sweep(robot: &Robot, requests: &[OptimizeRequest]) {
     let mut ipm_per_qp = Vec::new();
     let mut split = [0.0f64; 3];
     let (mut optimal, mut infeasible, mut max_iter, mut mean_feasible) = (0, 0, 0, 0);
-    for req in requests {
+    for req in &requests {
         let t0 = Instant::now();
         let resp = optimize(req, robot).expect("optimize");
         total_ms.push(t0.elapsed().as_secs_f64() * 1e3);
@@ -79,8 +92,15 @@ fn sweep(robot: &Robot, requests: &[OptimizeRequest]) {
         iterations.push(sol.stats.iterations as f64);
         rows.push(sol.stats.max_qp_rows as f64);
         solves.push(sol.stats.qp_solves as f64);
-        if sol.stats.qp_solves > 0 {
-            ipm_per_qp.push(sol.stats.ipm_iterations as f64 / sol.stats.qp_solves as f64);
+        if sol.stats.active_set_solves > 0 {
+            active_set_steps
+                .push(sol.stats.active_set_steps as f64 / sol.stats.active_set_solves as f64);
+        }
+        if sol.stats.qp_solves > sol.stats.active_set_solves {
+            ipm_per_qp.push(
+                sol.stats.ipm_iterations as f64
+                    / (sol.stats.qp_solves - sol.stats.active_set_solves) as f64,
+            );
         }
         split[0] += sol.stats.qp_ms;
         split[1] += sol.stats.evaluation_ms;
@@ -98,11 +118,12 @@ fn sweep(robot: &Robot, requests: &[OptimizeRequest]) {
         &mut rows,
         &mut solves,
         &mut ipm_per_qp,
+        &mut active_set_steps,
     ] {
         v.sort_by(|a, b| a.total_cmp(b));
     }
     let n = requests.len();
-    println!("optim sweep over {n} typical problems (10 obstacles, 150 samples, clearance 0.02 m)");
+    println!("optim sweep over {n} typical problems (10 obstacles, 150 samples, clearance 0.02 m), inner solver {inner:?}");
     println!(
         "  status: optimal {optimal}, infeasible {infeasible}, max_iterations {max_iter}; prior mean already feasible: {mean_feasible}"
     );
@@ -128,10 +149,17 @@ fn sweep(robot: &Robot, requests: &[OptimizeRequest]) {
     );
     if !ipm_per_qp.is_empty() {
         println!(
-            "  Clarabel solves per problem median {} p99 {}; interior-point iterations per solve median {:.1}",
+            "  QP solves per problem median {} p99 {}; Clarabel interior-point iterations per solve median {:.1}",
             percentile(&solves, 0.5),
             percentile(&solves, 0.99),
             percentile(&ipm_per_qp, 0.5)
+        );
+    }
+    if !active_set_steps.is_empty() {
+        println!(
+            "  active-set multiplier steps per solve median {:.1} p99 {:.1}",
+            percentile(&active_set_steps, 0.5),
+            percentile(&active_set_steps, 0.99)
         );
     }
     let total: f64 = solve_ms.iter().sum();
@@ -148,7 +176,14 @@ fn main() {
     let robot = Robot::panda().expect("panda");
     let n = env_number("DPMP_BENCH_PROBLEMS").unwrap_or(100);
     let requests = problems(&robot, n, env_number("DPMP_BENCH_RESTARTS"));
-    sweep(&robot, &requests);
+    let inners = match std::env::var("DPMP_BENCH_INNER").as_deref() {
+        Ok("clarabel") => vec![InnerSolver::Clarabel],
+        Ok("active_set") => vec![InnerSolver::ActiveSet],
+        _ => vec![InnerSolver::ActiveSet, InnerSolver::Clarabel],
+    };
+    for inner in inners {
+        sweep(&robot, &requests, inner);
+    }
     if std::env::var_os("DPMP_BENCH_SWEEP_ONLY").is_some() {
         return;
     }

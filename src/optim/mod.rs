@@ -9,8 +9,11 @@
 //! - [`phases`] — joint positions / velocities as rows in `z` per phase.
 //! - [`linear`] — limit, velocity, equality and opt-in weight-bound rows.
 //! - [`qp`] — one QP in Clarabel (CSC built directly).
+//! - [`dual_active_set`] — the warm-started inner QP solver (Goldfarb–Idnani).
+//! - [`qp_active_set`] — a [`qp::Qp`] solved by it (the SCP's intermediate steps).
 //! - [`nullspace`] — equality rows eliminated before Clarabel sees a QP.
 //! - [`scp`] — the trust-region SCP driver, [`SolveControl`], [`Solution`].
+//! - `scp_state` — the driver's state struct and its named steps.
 //! - [`restart`] — restarts from seeded prior draws after a local minimum.
 //! - `evaluate` — one iterate on the optimisation phases: clearances, goal, merit.
 //! - `subproblem` — one QP: linearisation, working set, constraint generation.
@@ -25,6 +28,7 @@
 
 pub mod continuous;
 pub mod diagnose;
+pub mod dual_active_set;
 mod evaluate;
 pub mod example;
 pub mod linear;
@@ -32,11 +36,13 @@ pub mod nullspace;
 pub mod phases;
 pub mod problem;
 pub mod qp;
+pub mod qp_active_set;
 pub mod report;
 pub mod request;
 pub mod restart;
 pub mod sampling;
 pub mod scp;
+mod scp_state;
 mod subproblem;
 pub mod verify;
 pub mod whiten;
@@ -47,7 +53,7 @@ pub use report::{
     Closest, JointTrajectory, OptimizeResponse, SampleResult, Status, TrajectoryPoint,
     TrajectoryReport,
 };
-pub use request::{Goal, OptimizeRequest, PriorSpec, SolverOptions};
+pub use request::{Goal, InnerSolver, OptimizeRequest, PriorSpec, SolverOptions};
 pub use scp::{Solution, SolveControl, SolveStats};
 
 use crate::robot::Robot;

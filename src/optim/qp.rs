@@ -96,8 +96,34 @@ pub struct QpSolution {
     pub rows: usize,
     /// Number of variables Clarabel solved (equalities eliminated).
     pub variables: usize,
-    /// Interior-point iterations Clarabel took.
+    /// Interior-point iterations Clarabel took (0 for the active-set path).
     pub ipm_iterations: u32,
+    /// Multiplier steps of the dual active-set solver (0 for Clarabel).
+    pub active_set_steps: usize,
+    /// Clarabel's status and residuals (`None` for the active-set path).
+    pub clarabel: Option<ClarabelInfo>,
+    /// The active-set path's row states by inequality index: the warm
+    /// start of the next solve over the same rows (plus new ones).
+    pub row_states: Option<super::dual_active_set::WarmStart>,
+    /// The trust ball's multiplier `μ` in the active-set path (0 when the
+    /// ball does not bind, and for Clarabel).
+    pub proximal_weight: f64,
+}
+
+/// Clarabel's own account of one solve: what the report's `final_qp`
+/// diagnostics show.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct ClarabelInfo {
+    /// `Solved` or `AlmostSolved`.
+    pub status: String,
+    /// Interior-point iterations.
+    pub iterations: u32,
+    /// Primal residual of the KKT system (Clarabel's scaled measure).
+    pub primal_residual: f64,
+    /// Dual residual of the KKT system.
+    pub dual_residual: f64,
+    /// Relative duality gap.
+    pub gap: f64,
 }
 
 /// Outcome of a solve that did not produce a solution.
@@ -171,7 +197,7 @@ impl Qp {
         }
     }
 
-    fn dim(&self) -> usize {
+    pub(super) fn dim(&self) -> usize {
         self.center.len()
     }
 
@@ -193,7 +219,7 @@ impl Qp {
 
     /// This problem over `z = z_p + N y` (variables `y`), without its
     /// equalities.
-    fn restricted_to(&self, space: &NullSpace) -> Qp {
+    pub(super) fn restricted_to(&self, space: &NullSpace) -> Qp {
         let inequalities = self
             .inequalities
             .iter()
@@ -355,6 +381,16 @@ impl Qp {
             rows: m,
             variables: n,
             ipm_iterations: solver.info.iterations,
+            active_set_steps: 0,
+            row_states: None,
+            proximal_weight: 0.0,
+            clarabel: Some(ClarabelInfo {
+                status: format!("{:?}", sol.status),
+                iterations: solver.info.iterations,
+                primal_residual: solver.info.res_primal,
+                dual_residual: solver.info.res_dual,
+                gap: solver.info.gap_rel,
+            }),
         })
     }
 }

@@ -1,6 +1,7 @@
 //! What the optimiser answers: the response, its ROS-shaped trajectory and
 //! the dense-verification report (field names are DESIGN.md's contract).
 
+use super::qp::ClarabelInfo;
 use serde::Serialize;
 
 /// Outcome of a solve.
@@ -80,6 +81,10 @@ pub struct TrajectoryReport {
     pub verified_samples: usize,
     /// Non-fatal notes (repairs, stops, screening).
     pub warnings: Vec<String>,
+    /// The final QP behind an `optimal` answer, solved by Clarabel at the
+    /// converged point; absent for other statuses.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub final_qp: Option<FinalQp>,
     /// Largest start / final configuration error (rad); not serialised
     /// (the contract has no such field) but checked by `is_feasible`.
     #[serde(skip)]
@@ -87,6 +92,65 @@ pub struct TrajectoryReport {
     /// Largest opt-in weight-bound excess; not serialised.
     #[serde(skip)]
     pub weight_bound_excess: f64,
+}
+
+/// The certifying QP of an `optimal` answer: Clarabel (the solver of
+/// record) at the converged point, exact goal cone and constraint
+/// generation. With the trust region free, the answer is a KKT point of the
+/// problem linearised there (the optimum, on a convex problem).
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct FinalQp {
+    /// Clarabel's status (`Solved`, `AlmostSolved`); `not_needed` when the
+    /// prior mean itself is feasible (cost 0: no QP).
+    pub status: String,
+    /// Clarabel's interior-point iterations.
+    pub iterations: u32,
+    /// Clarabel's primal residual.
+    pub primal_residual: f64,
+    /// Clarabel's dual residual.
+    pub dual_residual: f64,
+    /// Clarabel's relative duality gap.
+    pub gap: f64,
+    /// Whether the trust region limited the final step (then the point is
+    /// the best the line search could reach, not certified as a KKT point).
+    pub trust_region_active: bool,
+}
+
+impl FinalQp {
+    /// The prior mean is feasible: no QP was needed.
+    pub fn not_needed() -> FinalQp {
+        FinalQp {
+            status: "not_needed".into(),
+            iterations: 0,
+            primal_residual: 0.0,
+            dual_residual: 0.0,
+            gap: 0.0,
+            trust_region_active: false,
+        }
+    }
+
+    /// From Clarabel's account of the final solve.
+    pub fn from(info: &ClarabelInfo, trust_region_active: bool) -> FinalQp {
+        FinalQp {
+            status: info.status.clone(),
+            iterations: info.iterations,
+            primal_residual: info.primal_residual,
+            dual_residual: info.dual_residual,
+            gap: info.gap,
+            trust_region_active,
+        }
+    }
+
+    /// The final step was held by the trust region (or its line search).
+    pub fn held_by_ball(info: Option<&ClarabelInfo>) -> FinalQp {
+        match info {
+            Some(info) => FinalQp::from(info, true),
+            None => FinalQp {
+                trust_region_active: true,
+                ..FinalQp::not_needed()
+            },
+        }
+    }
 }
 
 /// One extra feasible trajectory (`samples: N`).

@@ -7,17 +7,20 @@
 //! violation (`max_iterations`: the penalty reached its cap, or the
 //! iteration limit). On the typical problems (`optim::example`) most such
 //! problems are feasible: a run started elsewhere finds a feasible answer.
-//! So [`Problem::solve`] restarts up to `options.restarts` times, each run
-//! from a draw `z ~ N(0, I)` of the whitened prior (seeded by
-//! `options.seed`, so the answer stays deterministic), still minimising the
-//! distance to the prior mean, and returns the first `optimal` one. That
-//! answer is a local optimum found from a draw: a warning says so.
+//! So [`Problem::solve`] restarts `options.restarts` times, each run from a
+//! draw `z ~ N(0, I)` of the whitened prior (seeded by `options.seed`),
+//! still minimising the distance to the prior mean. The restarts run in
+//! parallel and the answer is the closest `optimal` one (lowest cost, ties
+//! to the lower index), so it is the same whatever the thread count and
+//! whichever run finishes first. That answer is a local optimum found from
+//! a draw: a warning says so.
 //!
 //! A restart may take at most [`RESTART_MAX_ITERATIONS`] iterations (the
 //! successful restarts on the typical problems mostly need 7-35), so that a
 //! problem with no feasible answer costs a bounded multiple of one run.
 //! Nothing restarts after a proof of infeasibility, after an `optimal`
-//! answer, or once the deadline or the cancel flag has stopped the solve.
+//! answer, or once the deadline or the cancel flag has stopped the solve;
+//! a stop during the restarts answers with the first run's iterate.
 
 use super::problem::Problem;
 use super::report::Status;
@@ -26,6 +29,7 @@ use crate::Result;
 use nalgebra::DVector;
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
+use rayon::prelude::*;
 
 /// Largest accepted `options.restarts`.
 pub const MAX_RESTARTS: usize = 32;
@@ -37,43 +41,72 @@ const RESTART_STREAM: u64 = 0x7e57_a275;
 
 impl Problem {
     /// `first` (the run from the prior mean) when it is `optimal`,
-    /// `infeasible`, stopped by the caller or restarts are off; otherwise the
-    /// first `optimal` restart, or `first` with every run's counters when
-    /// none is.
+    /// `infeasible`, stopped by the caller or restarts are off; otherwise
+    /// the best `optimal` restart, or `first` with every run's counters
+    /// when none is.
+    ///
+    /// The restarts run in parallel (rayon), and the answer does not depend
+    /// on which finishes first: every draw is fixed up front by the seed,
+    /// every restart runs to its own end, and the pick is the lowest cost
+    /// among the `optimal` runs, ties to the lower restart index.
     pub(super) fn restart_if_stuck(&self, first: Solution, ctl: &SolveControl) -> Result<Solution> {
         let restarts = self.options.restarts;
         if first.status != Status::MaxIterations || restarts == 0 || ctl.stop_reason().is_some() {
             return Ok(first);
         }
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(self.options.seed ^ RESTART_STREAM);
-        let dim = self.whitening.dim();
-        let mean = DVector::zeros(dim);
+        let starts = self.restart_draws(restarts);
+        let mean = DVector::zeros(self.whitening.dim());
         let cap = self.options.max_iterations.min(RESTART_MAX_ITERATIONS);
+        let began = std::time::Instant::now();
+        let runs: Vec<Solution> = starts
+            .par_iter()
+            .map(|start| self.run(start, &mean, cap, ctl))
+            .collect::<Result<_>>()?;
         let mut spent = Spent::from(&first);
-        for k in 1..=restarts {
-            if let Some(why) = ctl.stop_reason() {
-                let note = format!("restarts stopped after {} of {restarts}: {why}", k - 1);
-                return Ok(spent.onto(first, note));
-            }
-            let start = DVector::from_fn(dim, |_, _| StandardNormal.sample(&mut rng));
-            let sol = self.run(&start, &mean, cap, ctl)?;
-            spent.add(&sol);
-            if sol.status == Status::Optimal {
+        spent.solve_ms += began.elapsed().as_secs_f64() * 1e3;
+        for run in &runs {
+            spent.add(run);
+        }
+        if let Some(why) = ctl.stop_reason() {
+            let note = format!("restarts stopped: {why}");
+            return Ok(spent.onto(first, note));
+        }
+        let best = runs
+            .into_iter()
+            .enumerate()
+            .filter(|(_, r)| r.status == Status::Optimal)
+            .min_by(|(i, a), (j, b)| a.mahalanobis.total_cmp(&b.mahalanobis).then(i.cmp(j)));
+        match best {
+            Some((k, sol)) => {
                 let note = format!(
-                    "the run from the prior mean found no feasible solution ({}); restart {k} of {restarts}, from a seeded prior draw, found this one: a local optimum, a feasible solution closer to the prior may exist",
-                    first.reason.as_deref().unwrap_or("no reason given")
+                    "the run from the prior mean found no feasible solution ({}); of {restarts} restarts from seeded prior draws, restart {} found the closest feasible one: a local optimum, a feasible solution closer to the prior may exist",
+                    first.reason.as_deref().unwrap_or("no reason given"),
+                    k + 1
                 );
-                return Ok(spent.onto(sol, note));
+                Ok(spent.onto(sol, note))
+            }
+            None => {
+                let note = format!(
+                    "{restarts} restarts from seeded prior draws found no feasible solution either"
+                );
+                Ok(spent.onto(first, note))
             }
         }
-        let note = format!(
-            "{restarts} restarts from seeded prior draws found no feasible solution either"
-        );
-        Ok(spent.onto(first, note))
+    }
+
+    /// The `n` restart starts: draws `z ~ N(0, I)` of the whitened prior
+    /// from `options.seed`.
+    fn restart_draws(&self, n: usize) -> Vec<DVector<f64>> {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(self.options.seed ^ RESTART_STREAM);
+        let dim = self.whitening.dim();
+        (0..n)
+            .map(|_| DVector::from_fn(dim, |_, _| StandardNormal.sample(&mut rng)))
+            .collect()
     }
 }
 
-/// Counters and wall time of every run of one solve.
+/// Counters of every run of one solve, and its wall time (the restarts
+/// overlap, so their times do not add up).
 struct Spent {
     stats: SolveStats,
     solve_ms: f64,
@@ -90,7 +123,6 @@ impl Spent {
     fn add(&mut self, restart: &Solution) {
         self.stats.absorb(&restart.stats);
         self.stats.restarts += 1;
-        self.solve_ms += restart.report.solve_ms;
     }
 
     /// `sol` reporting the work of every run, with `note` as a warning.

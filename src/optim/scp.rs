@@ -32,7 +32,7 @@ use super::phases::PhaseRows;
 use super::problem::Problem;
 use super::qp::{QpFailure, QpSolution};
 use super::report::{Status, TrajectoryReport};
-use super::subproblem::{ActiveRows, Linearisation};
+use super::scp_state::Scp;
 use super::verify::Verification;
 use crate::{Error, Result};
 use nalgebra::DVector;
@@ -56,7 +56,7 @@ pub const MAX_PENALTY: f64 = 1e6;
 /// on curved constraints is linear; this stops it at a relative cost error
 /// of about this size) and has stalled when not (exact generation or a
 /// larger penalty follows).
-const OPTIMALITY_TOLERANCE: f64 = 1e-3;
+pub(super) const OPTIMALITY_TOLERANCE: f64 = 1e-3;
 /// Largest trust-region half-width.
 pub const MAX_TRUST_REGION: f64 = 1e3;
 /// Smallest trust-region half-width before the iteration counts as stalled.
@@ -70,16 +70,16 @@ const MAX_ADDED_PER_ROUND: usize = 64;
 const LINE_SEARCH_HALVINGS: usize = 2;
 
 /// One QP step to judge: from `eval` towards `target` (whitened).
-struct StepTrial<'a> {
-    eval: &'a GridEval,
+pub(super) struct StepTrial<'a> {
+    pub(super) eval: &'a GridEval,
     /// `eval`'s merit at penalty `rho`.
-    merit: f64,
-    target: &'a DVector<f64>,
-    rows: &'a PhaseRows,
-    centre: &'a DVector<f64>,
-    rho: f64,
+    pub(super) merit: f64,
+    pub(super) target: &'a DVector<f64>,
+    pub(super) rows: &'a PhaseRows,
+    pub(super) centre: &'a DVector<f64>,
+    pub(super) rho: f64,
     /// The model's predicted merit decrease for the whole step.
-    predicted: f64,
+    pub(super) predicted: f64,
 }
 
 /// How a caller stops a running solve.
@@ -122,6 +122,10 @@ pub struct SolveStats {
     pub qp_solves: usize,
     /// Clarabel interior-point iterations over all solves.
     pub ipm_iterations: usize,
+    /// QPs solved by the dual active-set method (the rest by Clarabel).
+    pub active_set_solves: usize,
+    /// Multiplier steps of the dual active-set method over all its solves.
+    pub active_set_steps: usize,
     /// Steps rejected by the merit test.
     pub rejected_steps: usize,
     /// Largest QP: rows of the constraint matrix.
@@ -147,6 +151,10 @@ impl SolveStats {
     pub(super) fn count(&mut self, sol: &QpSolution) {
         self.qp_solves += 1;
         self.ipm_iterations += sol.ipm_iterations as usize;
+        if sol.clarabel.is_none() {
+            self.active_set_solves += 1;
+            self.active_set_steps += sol.active_set_steps;
+        }
         self.max_qp_rows = self.max_qp_rows.max(sol.rows);
         self.max_qp_variables = self.max_qp_variables.max(sol.variables);
     }
@@ -156,6 +164,8 @@ impl SolveStats {
         self.iterations += later.iterations;
         self.qp_solves += later.qp_solves;
         self.ipm_iterations += later.ipm_iterations;
+        self.active_set_solves += later.active_set_solves;
+        self.active_set_steps += later.active_set_steps;
         self.rejected_steps += later.rejected_steps;
         self.max_qp_rows = self.max_qp_rows.max(later.max_qp_rows);
         self.max_qp_variables = self.max_qp_variables.max(later.max_qp_variables);
@@ -220,176 +230,7 @@ impl Problem {
         max_iterations: usize,
         ctl: &SolveControl,
     ) -> Result<Solution> {
-        let started = Instant::now();
-        let mut rows = self.grid.clone();
-        let mut stats = SolveStats::default();
-        let mut rho = self.options.penalty;
-        let mut radius = self.options.trust_region;
-        let mut eval = timed(&mut stats.evaluation_ms, || {
-            self.evaluate_grid(&rows, start.clone(), centre)
-        });
-        // A feasible centre is its own answer (0 QPs); a feasible start
-        // elsewhere still has to move towards the centre.
-        let mut converged = start == centre;
-        let mut hint = ActiveRows::default();
-        let mut exact = false;
-        loop {
-            if converged && eval.feasible() {
-                let v = timed(&mut stats.verification_ms, || self.verify(&eval.w));
-                if v.flagged.is_empty() && self.is_feasible(&v.report) {
-                    stats.final_penalty = rho;
-                    return Ok(self.finish(
-                        Status::Optimal,
-                        &eval,
-                        Some(v),
-                        None,
-                        stats,
-                        started,
-                        &[],
-                    ));
-                }
-                let added = self.add_flagged(&mut rows, &v);
-                stats.added_phases += added;
-                if added == 0 {
-                    let reason = "dense verification failed on a constraint the optimiser cannot refine (goal or equality)";
-                    return Ok(self.finish(
-                        Status::MaxIterations,
-                        &eval,
-                        Some(v),
-                        Some(reason.into()),
-                        stats,
-                        started,
-                        &[],
-                    ));
-                }
-                eval = timed(&mut stats.evaluation_ms, || {
-                    self.evaluate_grid(&rows, eval.z.clone(), centre)
-                });
-            }
-            converged = false;
-            if let Some(why) = ctl.stop_reason() {
-                let warn = format!("solver stopped early: {why}");
-                return Ok(self.stopped_early(&eval, warn, stats, started));
-            }
-            if stats.iterations >= max_iterations {
-                let reason = format!(
-                    "no converged feasible solution within {} iterations ({})",
-                    max_iterations,
-                    self.worst_constraint(&eval)
-                );
-                return Ok(self.gave_up(&eval, reason, stats, started));
-            }
-            let at = Linearisation {
-                exact,
-                rows: &rows,
-                eval: &eval,
-                centre,
-                rho,
-                trust: eval.linear_ok.then_some(radius),
-            };
-            let mut qp_ms = 0.0;
-            let subproblem = timed(&mut qp_ms, || self.subproblem(&at, &hint, ctl, &mut stats));
-            stats.qp_ms += qp_ms;
-            let (sol, model_here) = match subproblem {
-                Ok((sol, model_here, active)) => {
-                    hint = active;
-                    (sol, model_here)
-                }
-                Err(QpFailure::Infeasible) => {
-                    let reason = "joint position limits (minus the margin), velocity limits and the start / final configuration cannot all hold".to_string();
-                    return Ok(self.unverified(Status::Infeasible, &eval, reason, stats, started));
-                }
-                Err(QpFailure::OutOfTime) => {
-                    let warn = "solver stopped early: deadline reached".to_string();
-                    return Ok(self.stopped_early(&eval, warn, stats, started));
-                }
-                Err(QpFailure::Numerical(what)) => {
-                    let reason = format!("QP solver failed ({what}); best iterate returned");
-                    return Ok(self.gave_up(&eval, reason, stats, started));
-                }
-            };
-            stats.iterations += 1;
-            let full_step = (&sol.z - &eval.z).norm();
-            let merit_here = eval.merit(rho);
-            let scale = 1.0 + merit_here.abs();
-            let trial = StepTrial {
-                eval: &eval,
-                merit: merit_here,
-                target: &sol.z,
-                rows: &rows,
-                centre,
-                rho,
-                predicted: model_here - sol.objective,
-            };
-            let (accepted, alpha) = self.line_search(&trial, &mut stats);
-            tracing::debug!(
-                iteration = stats.iterations,
-                rows = sol.rows,
-                merit = merit_here,
-                predicted = trial.predicted,
-                step = full_step,
-                alpha,
-                radius,
-                rho,
-                violation = eval.true_violation,
-                accept = accepted.is_some(),
-                "scp step"
-            );
-            let step = alpha * full_step;
-            if let Some((next, predicted, actual)) = accepted {
-                // A step that barely moves the merit, or is predicted to
-                // gain less than the optimality tolerance, is a stall
-                // whether or not the iterate is feasible: an infeasible
-                // crawl (e.g. along a kink of the distance, or towards a
-                // local minimum of the violation) goes on to exact
-                // generation and a larger penalty instead of spending the
-                // iteration cap.
-                let tiny = step <= 1e-6 * (1.0 + next.z.amax())
-                    || actual.abs() <= 1e-6 * scale
-                    || predicted <= OPTIMALITY_TOLERANCE * scale;
-                if alpha < 1.0 {
-                    radius = (0.25 * radius).min(0.5 * full_step);
-                } else if eval.linear_ok && actual >= 0.75 * predicted && step >= 0.9 * radius {
-                    radius = (radius * 2.0).min(MAX_TRUST_REGION);
-                }
-                eval = next;
-                if tiny {
-                    converged = true;
-                }
-            } else {
-                stats.rejected_steps += 1;
-                radius = (0.25 * radius).min(0.5 * full_step);
-                if radius < MIN_TRUST_REGION {
-                    converged = true;
-                    radius = self.options.trust_region;
-                }
-            }
-            if converged && !eval.feasible() && eval.linear_ok {
-                // A stall short of feasibility changes the model: the trust
-                // region it shrank to belongs to the old one.
-                converged = false;
-                radius = radius.max(self.options.trust_region);
-                if !exact {
-                    // A stall on the working-set model proves nothing: go
-                    // on with every clearance row generated, so that a
-                    // penalty increase rests on the full model.
-                    exact = true;
-                    continue;
-                }
-                rho *= 10.0;
-                if rho > MAX_PENALTY {
-                    stats.final_penalty = rho;
-                    // A stall of a non-convex penalty method is a local
-                    // minimum of the violation, not a proof: `infeasible` is
-                    // kept for the certificates of `diagnose` and the QP.
-                    let reason = format!(
-                        "no feasible solution found: {} could not be reduced further at the largest penalty (a local minimum of the violation; the problem may be infeasible)",
-                        self.worst_constraint(&eval)
-                    );
-                    return Ok(self.gave_up(&eval, reason, stats, started));
-                }
-            }
-        }
+        Scp::new(self, start, centre, max_iterations, ctl).run()
     }
 
     /// The step of an SCP iteration, judged on the true merit: the QP's
@@ -399,7 +240,7 @@ impl Problem {
     /// which are cheaper than another QP on a smaller trust region. Returns
     /// the accepted iterate with its predicted and actual decrease, and the
     /// step fraction tried last.
-    fn line_search(
+    pub(super) fn line_search(
         &self,
         trial: &StepTrial,
         stats: &mut SolveStats,
@@ -441,7 +282,7 @@ impl Problem {
     }
 
     /// Add (a spread-out subset of) the phases dense verification flagged.
-    fn add_flagged(&self, rows: &mut PhaseRows, v: &Verification) -> usize {
+    pub(super) fn add_flagged(&self, rows: &mut PhaseRows, v: &Verification) -> usize {
         let before = rows.len();
         let stride = v.flagged.len().div_ceil(MAX_ADDED_PER_ROUND).max(1);
         for &p in v.flagged.iter().step_by(stride) {
@@ -450,53 +291,8 @@ impl Problem {
         rows.len() - before
     }
 
-    /// Finish without a prior verification (it is run here) and with `reason`.
-    fn unverified(
-        &self,
-        status: Status,
-        eval: &GridEval,
-        reason: String,
-        stats: SolveStats,
-        started: Instant,
-    ) -> Solution {
-        self.finish(status, eval, None, Some(reason), stats, started, &[])
-    }
-
-    /// Finish as `max_iterations` without a converged feasible iterate,
-    /// for `reason`.
-    fn gave_up(
-        &self,
-        eval: &GridEval,
-        reason: String,
-        stats: SolveStats,
-        started: Instant,
-    ) -> Solution {
-        self.unverified(Status::MaxIterations, eval, reason, stats, started)
-    }
-
-    /// Finish as `max_iterations` because the caller stopped the solver;
-    /// the reason is also reported as a warning.
-    fn stopped_early(
-        &self,
-        eval: &GridEval,
-        warn: String,
-        stats: SolveStats,
-        started: Instant,
-    ) -> Solution {
-        let warnings = [warn.clone()];
-        self.finish(
-            Status::MaxIterations,
-            eval,
-            None,
-            Some(warn),
-            stats,
-            started,
-            &warnings,
-        )
-    }
-
     #[allow(clippy::too_many_arguments)]
-    fn finish(
+    pub(super) fn finish(
         &self,
         status: Status,
         eval: &GridEval,

@@ -54,10 +54,18 @@ impl Problem {
             ..Default::default()
         };
         let mut round = 0;
+        let mut warm = super::dual_active_set::WarmStart::default();
+        let mut mu = at.proximal_hint;
         loop {
             round += 1;
-            let sol = work.qp.solve(&settings)?;
+            let sol = if at.certify {
+                certifying_solve(&work.qp, &settings)?
+            } else {
+                work.qp.solve_active_set(&warm, mu)?
+            };
             stats.count(&sol);
+            warm = sol.row_states.clone().unwrap_or_default();
+            mu = sol.proximal_weight;
             let w = self.whitening.weights(&sol.z);
             let linear_missing: Vec<RowRef> = self
                 .linear
@@ -320,6 +328,23 @@ impl<'c> WorkingQp<'c> {
     }
 }
 
+/// The final QP is solved [`CERTIFY_TIGHTENING`] times tighter than
+/// `options.qp_tolerance` (at least 1e-12), so that on a convex problem
+/// the answer meets the closed form to about 1e-8; if Clarabel cannot reach
+/// that, at the requested tolerance.
+const CERTIFY_TIGHTENING: f64 = 1e-2;
+
+fn certifying_solve(qp: &Qp, settings: &QpSettings) -> Result<QpSolution, QpFailure> {
+    let tight = QpSettings {
+        tolerance: (settings.tolerance * CERTIFY_TIGHTENING).max(1e-12),
+        ..settings.clone()
+    };
+    match qp.solve(&tight) {
+        Err(QpFailure::Numerical(_)) => qp.solve(settings),
+        other => other,
+    }
+}
+
 /// The violated rows `violated` (index, violation) thinned in time, as
 /// indices into `clearance`.
 fn thin_violated(clearance: &[ClearanceRow], violated: &[(usize, f64)]) -> Vec<usize> {
@@ -367,11 +392,17 @@ pub(super) struct Linearisation<'a> {
     /// Generate clearance rows until none is violated (else
     /// [`WORKING_SET_ROUNDS`] rounds).
     pub(super) exact: bool,
+    /// Solve with Clarabel (the final, certifying QP) instead of the dual
+    /// active-set method.
+    pub(super) certify: bool,
     pub(super) rows: &'a PhaseRows,
     pub(super) eval: &'a GridEval,
     pub(super) centre: &'a DVector<f64>,
     pub(super) rho: f64,
     pub(super) trust: Option<f64>,
+    /// The trust ball's multiplier of the previous active-set QP: where
+    /// this one's search starts.
+    pub(super) proximal_hint: f64,
 }
 
 #[cfg(test)]
@@ -416,11 +447,13 @@ mod tests {
             assert!(!eval.pairs.is_empty(), "seed {seed}: no clearance pair");
             let at = Linearisation {
                 exact: true,
+                certify: true,
                 rows: &p.grid,
                 eval: &eval,
                 centre: &centre,
                 rho: 1e3,
                 trust: Some(2.0),
+                proximal_hint: 0.0,
             };
             let mut stats = SolveStats::default();
             let (sol, _, _) = p

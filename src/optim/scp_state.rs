@@ -1,0 +1,406 @@
+//! The SCP driver's state and its named steps.
+//!
+//! [`Scp`] holds everything that changes between iterations (the iterate,
+//! trust radius, penalty, working-set hint, phase set, counters) and each
+//! decision of the loop is one method:
+//!
+//! 1. [`Scp::finish_or_certify`] — a converged feasible iterate is
+//!    *certified* first (the next QP is Clarabel's: see below), then
+//!    verified densely; flagged phases join the optimisation set;
+//! 2. [`Scp::out_of_budget`] — the caller's deadline / cancel flag and the
+//!    iteration limit;
+//! 3. [`Scp::generate_and_solve`] — linearise, build the working set,
+//!    solve by constraint generation (the dual active-set method, or
+//!    Clarabel when certifying);
+//! 4. [`Scp::accept`] / [`Scp::shrink`] — the merit test and the trust
+//!    radius;
+//! 5. [`Scp::stall`] — a stall short of feasibility switches to exact
+//!    generation, then raises the penalty, then gives up.
+//!
+//! **Certification.** Intermediate QPs are solved by the warm-startable
+//! [dual active-set method](super::dual_active_set); the weights returned as
+//! `optimal` always come from a QP solved by Clarabel (the solver of
+//! record) at the converged point: exact goal cone, exact constraint
+//! generation, the trust ball reset to at least its initial radius. When
+//! Clarabel's step is accepted, tiny by the usual rule and strictly inside
+//! the ball, the point is a KKT point of the linearised problem (on a
+//! convex problem: its optimum) and goes to dense verification; otherwise
+//! the loop goes on (back to the active-set method if the step was not
+//! tiny). Clarabel's status and residuals go into the report's `final_qp`.
+
+use super::evaluate::GridEval;
+use super::phases::PhaseRows;
+use super::problem::Problem;
+use super::qp::{ClarabelInfo, QpFailure, QpSolution};
+use super::report::{FinalQp, Status};
+use super::scp::{
+    timed, Solution, SolveControl, SolveStats, StepTrial, MAX_PENALTY, MAX_TRUST_REGION,
+    MIN_TRUST_REGION, OPTIMALITY_TOLERANCE,
+};
+use super::subproblem::{ActiveRows, Linearisation};
+use crate::Result;
+use nalgebra::DVector;
+use std::time::Instant;
+
+/// A certifying step longer than this fraction of the trust radius counts
+/// as held by the ball (not a KKT point of the linearised problem).
+const BALL_ACTIVE_FRACTION: f64 = 0.99;
+
+/// What one iteration's QP produced.
+struct Step {
+    sol: QpSolution,
+    /// The model's value at the current iterate.
+    model_here: f64,
+}
+
+/// The state of one SCP run (see the module docs).
+pub(super) struct Scp<'a> {
+    problem: &'a Problem,
+    centre: &'a DVector<f64>,
+    ctl: &'a SolveControl,
+    max_iterations: usize,
+    started: Instant,
+    rows: PhaseRows,
+    stats: SolveStats,
+    rho: f64,
+    radius: f64,
+    eval: GridEval,
+    hint: ActiveRows,
+    /// Every violated clearance row joins the QP (after a stall).
+    exact: bool,
+    /// The next QP is Clarabel's certifying one.
+    certify: bool,
+    /// The last accepted step was tiny (or the radius collapsed).
+    converged: bool,
+    /// Clarabel certified the current iterate.
+    certified: Option<FinalQp>,
+    /// Clarabel's account of the last QP it solved.
+    last_clarabel: Option<ClarabelInfo>,
+    /// The trust ball's multiplier in the last active-set QP.
+    proximal_weight: f64,
+}
+
+/// What a step of the loop decided: go on, or the run's answer.
+type Flow = Option<Solution>;
+
+impl<'a> Scp<'a> {
+    pub(super) fn new(
+        problem: &'a Problem,
+        start: &DVector<f64>,
+        centre: &'a DVector<f64>,
+        max_iterations: usize,
+        ctl: &'a SolveControl,
+    ) -> Self {
+        let started = Instant::now();
+        let rows = problem.grid.clone();
+        let mut stats = SolveStats::default();
+        let eval = timed(&mut stats.evaluation_ms, || {
+            problem.evaluate_grid(&rows, start.clone(), centre)
+        });
+        Scp {
+            problem,
+            centre,
+            ctl,
+            max_iterations,
+            started,
+            rows,
+            stats,
+            rho: problem.options.penalty,
+            radius: problem.options.trust_region,
+            eval,
+            hint: ActiveRows::default(),
+            exact: false,
+            certify: false,
+            // A feasible centre is its own answer (0 QPs, cost 0); a
+            // feasible start elsewhere still has to move towards the centre.
+            converged: start == centre,
+            certified: (start == centre).then(FinalQp::not_needed),
+            last_clarabel: None,
+            proximal_weight: 0.0,
+        }
+    }
+
+    /// Iterate until a step returns the answer.
+    pub(super) fn run(mut self) -> Result<Solution> {
+        loop {
+            if let Some(done) = self.finish_or_certify() {
+                return Ok(done);
+            }
+            if let Some(done) = self.out_of_budget() {
+                return Ok(done);
+            }
+            let step = match self.generate_and_solve() {
+                Ok(step) => step,
+                Err(done) => return Ok(*done),
+            };
+            self.stats.iterations += 1;
+            self.judge(step);
+            if let Some(done) = self.stall() {
+                return Ok(done);
+            }
+        }
+    }
+
+    /// Step 1: a converged feasible iterate is certified by Clarabel, then
+    /// verified densely; `optimal` when verification passes, otherwise the
+    /// flagged phases join the optimisation set.
+    fn finish_or_certify(&mut self) -> Flow {
+        if !(self.converged && self.eval.feasible()) {
+            return None;
+        }
+        let Some(final_qp) = self.certified.clone() else {
+            self.converged = false;
+            self.certify = true;
+            self.radius = self.radius.max(self.problem.options.trust_region);
+            return None;
+        };
+        let p = self.problem;
+        let v = timed(&mut self.stats.verification_ms, || p.verify(&self.eval.w));
+        if v.flagged.is_empty() && p.is_feasible(&v.report) {
+            self.stats.final_penalty = self.rho;
+            let mut sol = self.answer(Status::Optimal, Some(v), None, &[]);
+            sol.report.final_qp = Some(final_qp);
+            return Some(sol);
+        }
+        let added = p.add_flagged(&mut self.rows, &v);
+        self.stats.added_phases += added;
+        if added == 0 {
+            let reason = "dense verification failed on a constraint the optimiser cannot refine (goal or equality)";
+            return Some(self.answer(Status::MaxIterations, Some(v), Some(reason.into()), &[]));
+        }
+        let z = self.eval.z.clone();
+        self.eval = timed(&mut self.stats.evaluation_ms, || {
+            p.evaluate_grid(&self.rows, z, self.centre)
+        });
+        self.converged = false;
+        self.certified = None;
+        None
+    }
+
+    /// Step 2: the caller's deadline / cancel flag and the iteration limit.
+    fn out_of_budget(&mut self) -> Flow {
+        if let Some(why) = self.ctl.stop_reason() {
+            return Some(self.stopped_early(format!("solver stopped early: {why}")));
+        }
+        if self.stats.iterations >= self.max_iterations {
+            let reason = format!(
+                "no converged feasible solution within {} iterations ({})",
+                self.max_iterations,
+                self.problem.worst_constraint(&self.eval)
+            );
+            return Some(self.answer(Status::MaxIterations, None, Some(reason), &[]));
+        }
+        None
+    }
+
+    /// Step 3: the QP at the iterate, by constraint generation. A failure
+    /// is the run's answer.
+    fn generate_and_solve(&mut self) -> std::result::Result<Step, Box<Solution>> {
+        let at = Linearisation {
+            exact: self.exact || self.certify,
+            certify: self.certify
+                || self.problem.options.inner_solver == super::request::InnerSolver::Clarabel,
+            rows: &self.rows,
+            eval: &self.eval,
+            centre: self.centre,
+            rho: self.rho,
+            trust: self.eval.linear_ok.then_some(self.radius),
+            proximal_hint: self.proximal_weight,
+        };
+        let mut qp_ms = 0.0;
+        let p = self.problem;
+        let (hint, ctl, stats) = (&self.hint, self.ctl, &mut self.stats);
+        let outcome = timed(&mut qp_ms, || p.subproblem(&at, hint, ctl, stats));
+        self.stats.qp_ms += qp_ms;
+        match outcome {
+            Ok((sol, model_here, active)) => {
+                self.hint = active;
+                Ok(Step { sol, model_here })
+            }
+            Err(QpFailure::Infeasible) => {
+                let reason = "joint position limits (minus the margin), velocity limits and the start / final configuration cannot all hold".to_string();
+                Err(Box::new(self.answer(
+                    Status::Infeasible,
+                    None,
+                    Some(reason),
+                    &[],
+                )))
+            }
+            Err(QpFailure::OutOfTime) => Err(Box::new(
+                self.stopped_early("solver stopped early: deadline reached".into()),
+            )),
+            Err(QpFailure::Numerical(what)) => {
+                let reason = format!("QP solver failed ({what}); best iterate returned");
+                Err(Box::new(self.answer(
+                    Status::MaxIterations,
+                    None,
+                    Some(reason),
+                    &[],
+                )))
+            }
+        }
+    }
+
+    /// Step 4: the merit test on the QP's step (with its halvings), then
+    /// [`Scp::accept`] or [`Scp::shrink`].
+    fn judge(&mut self, step: Step) {
+        let merit_here = self.eval.merit(self.rho);
+        let trial = StepTrial {
+            eval: &self.eval,
+            merit: merit_here,
+            target: &step.sol.z,
+            rows: &self.rows,
+            centre: self.centre,
+            rho: self.rho,
+            predicted: step.model_here - step.sol.objective,
+        };
+        let full_step = (&step.sol.z - &self.eval.z).norm();
+        if step.sol.clarabel.is_some() {
+            self.last_clarabel = step.sol.clarabel.clone();
+        } else {
+            self.proximal_weight = step.sol.proximal_weight;
+        }
+        let (accepted, alpha) = self.problem.line_search(&trial, &mut self.stats);
+        tracing::debug!(
+            iteration = self.stats.iterations,
+            rows = step.sol.rows,
+            merit = merit_here,
+            predicted = trial.predicted,
+            step = full_step,
+            alpha,
+            radius = self.radius,
+            rho = self.rho,
+            violation = self.eval.true_violation,
+            certify = self.certify,
+            accept = accepted.is_some(),
+            "scp step"
+        );
+        match accepted {
+            Some((next, predicted, actual)) => {
+                let scale = 1.0 + merit_here.abs();
+                self.accept(next, predicted, actual, alpha, full_step, scale, &step.sol);
+            }
+            None => self.shrink(full_step),
+        }
+    }
+
+    /// An accepted step: move, adapt the radius, and decide convergence. A
+    /// step that barely moves the merit, or is predicted to gain less than
+    /// the optimality tolerance, has converged when feasible and stalled
+    /// when not (an infeasible crawl goes on to [`Scp::stall`]).
+    #[allow(clippy::too_many_arguments)]
+    fn accept(
+        &mut self,
+        next: GridEval,
+        predicted: f64,
+        actual: f64,
+        alpha: f64,
+        full_step: f64,
+        scale: f64,
+        sol: &QpSolution,
+    ) {
+        let step = alpha * full_step;
+        let tiny = step <= 1e-6 * (1.0 + next.z.amax())
+            || actual.abs() <= 1e-6 * scale
+            || predicted <= OPTIMALITY_TOLERANCE * scale;
+        let radius_before = self.radius;
+        let ball_held = full_step >= BALL_ACTIVE_FRACTION * radius_before;
+        // The active-set path holds the ball only approximately: a bound
+        // ball shows as a positive proximal weight.
+        let reached_ball = step >= 0.9 * self.radius || sol.proximal_weight > 0.0;
+        if alpha < 1.0 {
+            self.radius = (0.25 * self.radius).min(0.5 * full_step);
+        } else if self.eval.linear_ok
+            && ((actual >= 0.75 * predicted && reached_ball) || (self.certify && tiny && ball_held))
+        {
+            self.radius = (self.radius * 2.0).min(MAX_TRUST_REGION);
+        }
+        self.eval = next;
+        self.certified = None;
+        if self.certify {
+            let free = alpha == 1.0 && (!ball_held || radius_before >= MAX_TRUST_REGION);
+            if tiny && free {
+                self.certified = sol.clarabel.as_ref().map(|info| FinalQp::from(info, false));
+            } else if tiny && alpha < 1.0 {
+                // Clarabel's step had to be cut back and the rest is tiny:
+                // the point stands, with the ball (the cut) holding it.
+                self.certified = Some(FinalQp::held_by_ball(sol.clarabel.as_ref()));
+            } else if !tiny {
+                self.certify = false;
+            }
+        }
+        if tiny && (!self.certify || self.certified.is_some()) {
+            self.converged = true;
+        }
+    }
+
+    /// A rejected step: shrink the trust region; a collapsed radius counts
+    /// as converged (a certifying QP that cannot move certifies the point
+    /// with the ball held).
+    fn shrink(&mut self, full_step: f64) {
+        self.stats.rejected_steps += 1;
+        self.radius = (0.25 * self.radius).min(0.5 * full_step);
+        if self.radius < MIN_TRUST_REGION {
+            self.converged = true;
+            self.radius = self.problem.options.trust_region;
+            if self.certify && self.certified.is_none() {
+                self.certified = Some(FinalQp::held_by_ball(self.last_clarabel.as_ref()));
+            }
+        }
+    }
+
+    /// Step 5: a stall short of feasibility changes the model (exact
+    /// generation, then a larger penalty; each switch resets the trust
+    /// region, which belongs to the old model); past [`MAX_PENALTY`] the
+    /// run gives up. `infeasible` is kept for proofs (the diagnosis and a
+    /// QP whose hard rows are incompatible): this is a local minimum.
+    fn stall(&mut self) -> Flow {
+        if !(self.converged && !self.eval.feasible() && self.eval.linear_ok) {
+            return None;
+        }
+        self.converged = false;
+        self.certify = false;
+        self.certified = None;
+        self.radius = self.radius.max(self.problem.options.trust_region);
+        if !self.exact {
+            self.exact = true;
+            return None;
+        }
+        self.rho *= 10.0;
+        if self.rho <= MAX_PENALTY {
+            return None;
+        }
+        self.stats.final_penalty = self.rho;
+        let reason = format!(
+            "no feasible solution found: {} could not be reduced further at the largest penalty (a local minimum of the violation; the problem may be infeasible)",
+            self.problem.worst_constraint(&self.eval)
+        );
+        Some(self.answer(Status::MaxIterations, None, Some(reason), &[]))
+    }
+
+    /// Finish as `max_iterations` because the caller stopped the solver;
+    /// the reason is also a warning.
+    fn stopped_early(&mut self, warn: String) -> Solution {
+        let warnings = [warn.clone()];
+        self.answer(Status::MaxIterations, None, Some(warn), &warnings)
+    }
+
+    /// The run's answer at the current iterate.
+    fn answer(
+        &mut self,
+        status: Status,
+        verification: Option<super::verify::Verification>,
+        reason: Option<String>,
+        extra_warnings: &[String],
+    ) -> Solution {
+        self.problem.finish(
+            status,
+            &self.eval,
+            verification,
+            reason,
+            std::mem::take(&mut self.stats),
+            self.started,
+            extra_warnings,
+        )
+    }
+}

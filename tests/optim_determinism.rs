@@ -1,0 +1,43 @@
+//! Same request, same bytes (apart from the wall-clock `solve_ms`): across
+//! repeated runs and across 1 and 2 rayon worker threads, with the
+//! restarts (which run in parallel) included.
+
+use dpmp::optim::example::{typical_request, ExampleSettings};
+use dpmp::optim::{optimize, OptimizeRequest, Status};
+use dpmp::robot::Robot;
+
+fn answer_with_threads(req: &OptimizeRequest, robot: &Robot, threads: usize) -> (Status, String) {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    let resp = pool.install(|| optimize(req, robot)).unwrap();
+    (resp.status, resp.deterministic_json())
+}
+
+#[test]
+fn parallel_restarts_give_the_same_bytes_on_one_or_two_threads() {
+    // Typical problem 315 needs the restarts (see optim_requests).
+    let robot = Robot::panda().unwrap();
+    let req = typical_request(&robot, 315, &ExampleSettings::default()).unwrap();
+    let (status, reference) = answer_with_threads(&req, &robot, 1);
+    assert_eq!(status, Status::Optimal);
+    assert!(reference.contains("restart"), "the restarts must have run");
+    for threads in [2, 2, 1, 2] {
+        let (_, again) = answer_with_threads(&req, &robot, threads);
+        assert_eq!(again, reference, "{threads} threads");
+    }
+}
+
+#[test]
+fn a_hundred_runs_give_the_same_bytes() {
+    let robot = Robot::panda().unwrap();
+    let req = typical_request(&robot, 5, &ExampleSettings::default()).unwrap();
+    let (status, reference) = answer_with_threads(&req, &robot, 2);
+    assert_eq!(status, Status::Optimal);
+    for run in 0..100 {
+        let threads = 1 + run % 2;
+        let (_, again) = answer_with_threads(&req, &robot, threads);
+        assert_eq!(again, reference, "run {run} on {threads} threads");
+    }
+}

@@ -1,0 +1,243 @@
+//! Convex problems are solved exactly. With no obstacle and no goal the
+//! problem is one convex QP (limits, velocities, start equality), and the
+//! optimiser's answer must be its optimum, checked against independent
+//! computations on the shipped real prior (`models/priors/example`, and the
+//! 25 published annotations when `../shared` is present):
+//!
+//! - start only, no limit binding: Gaussian conditioning on the start
+//!   (closed form, 1e-8);
+//! - a 0.25 rad joint-limit margin that binds: one Clarabel solve of the
+//!   whole QP built here from the basis, the whitening and the limits
+//!   (cost 1e-7 relative, trajectory 1e-6 rad).
+
+use dpmp::optim::qp::{Inequality, Qp, QpSettings};
+use dpmp::optim::whiten::Whitening;
+use dpmp::optim::{OptimizeRequest, Problem, SolveControl, Status};
+use dpmp::promp::annotation::JointAnnotation;
+use dpmp::promp::{ViaPoint, WeightDistribution};
+use dpmp::robot::Robot;
+use nalgebra::{DMatrix, DVector};
+use std::path::{Path, PathBuf};
+
+fn manifest() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// Every real prior at hand: the shipped example, plus the published 25.
+fn real_priors() -> Vec<Vec<JointAnnotation>> {
+    let mut out = vec![load(&manifest().join("models/priors/example"), 0)];
+    let shared = manifest().join("../shared/reference/dpmp-annotation");
+    if shared.is_dir() {
+        out.extend((0..25).map(|k| load(&shared, k)));
+    }
+    out
+}
+
+fn load(dir: &Path, k: usize) -> Vec<JointAnnotation> {
+    (1..=7)
+        .map(|j| {
+            let path = dir.join(format!("J{j}/{k}.json"));
+            serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+        })
+        .collect()
+}
+
+/// A request with the prior, no obstacle, no goal, a start `offset` rad
+/// from the prior mean's first configuration (per joint pattern).
+fn request(annotation: &[JointAnnotation], robot: &Robot, margin: f64) -> OptimizeRequest {
+    let json = serde_json::json!({
+        "prior": { "annotation": annotation },
+        "obstacles": [],
+        "joint_limit_margin_rad": margin,
+    });
+    let mut req: OptimizeRequest = serde_json::from_value(json).unwrap();
+    let p = req.validate(robot).unwrap();
+    let mean = p.prior().trajectory_mean(p.basis());
+    req.start = Some(
+        (0..7)
+            .map(|j| mean[(0, j)] + 0.03 * (j as f64 - 3.0))
+            .collect(),
+    );
+    req
+}
+
+/// The prior with the optimiser's regularisation `Σ + λI`.
+fn shifted_prior(p: &Problem) -> WeightDistribution {
+    let prior = p.prior();
+    let n = prior.dim();
+    let lambda = Whitening::default_lambda(prior);
+    WeightDistribution::new(
+        prior.mean.clone(),
+        &prior.cov + DMatrix::identity(n, n) * lambda,
+        7,
+        prior.n_basis,
+    )
+    .unwrap()
+}
+
+/// Gaussian conditioning of the regularised prior on the start.
+fn conditioned(p: &Problem, req: &OptimizeRequest) -> DVector<f64> {
+    let via = ViaPoint {
+        phase: 0.0,
+        q: req.start.clone().unwrap(),
+        noise_var: 0.0,
+    };
+    shifted_prior(p).condition(p.basis(), &[via]).unwrap().mean
+}
+
+#[test]
+fn start_only_on_real_priors_is_gaussian_conditioning() {
+    let robot = Robot::panda().unwrap();
+    let mut checked = 0;
+    for (k, annotation) in real_priors().iter().enumerate() {
+        let req = request(annotation, &robot, 0.0);
+        let p = req.validate(&robot).unwrap();
+        let post = conditioned(&p, &req);
+        // The closed form applies when no limit binds at it.
+        if !p.is_feasible(&p.evaluate(post.as_slice())) {
+            continue;
+        }
+        checked += 1;
+        let sol = p.solve(&SolveControl::default()).unwrap();
+        assert_eq!(sol.status, Status::Optimal, "prior {k}: {:?}", sol.reason);
+        let diff = (DVector::from_column_slice(&sol.weights) - &post).amax();
+        // Real priors' weights are O(100) (far outside the joint range),
+        // so the weights are compared relatively, the trajectory in rad.
+        let scale = 1.0 + post.amax();
+        assert!(
+            diff < 1e-8 * scale,
+            "prior {k}: weights off by {diff:e} (|w| {scale})"
+        );
+        let gap = max_position_gap(&p, &sol.weights, post.as_slice());
+        assert!(gap < 1e-8, "prior {k}: trajectory off by {gap:e} rad");
+        let m_post = p.mahalanobis(post.as_slice());
+        let rel = (sol.mahalanobis.powi(2) - m_post.powi(2)).abs() / m_post.powi(2);
+        assert!(
+            rel < 1e-10,
+            "prior {k}: cost {} vs {m_post}",
+            sol.mahalanobis
+        );
+        let final_qp = sol
+            .report
+            .final_qp
+            .as_ref()
+            .expect("an optimal answer names its final QP");
+        assert!(!final_qp.trust_region_active, "prior {k}");
+    }
+    assert!(checked >= 1, "no real prior has a non-binding conditioning");
+}
+
+/// Largest joint-position difference (rad) between two weight vectors'
+/// trajectories.
+fn max_position_gap(p: &Problem, a: &[f64], b: &[f64]) -> f64 {
+    let (ta, tb) = (p.trajectory(a), p.trajectory(b));
+    ta.points
+        .iter()
+        .zip(&tb.points)
+        .flat_map(|(x, y)| {
+            x.positions
+                .iter()
+                .zip(&y.positions)
+                .map(|(u, v)| (u - v).abs())
+        })
+        .fold(0.0, f64::max)
+}
+
+/// The whole QP over `z` (`w = μ + L z`): every position and velocity limit
+/// at every optimisation and verification phase, the start equalities;
+/// cost `|z|²`; solved once by Clarabel.
+fn direct_solve(p: &Problem, req: &OptimizeRequest, robot: &Robot, margin: f64) -> DVector<f64> {
+    let l = Whitening::new(p.prior(), Whitening::default_lambda(p.prior()))
+        .unwrap()
+        .factor()
+        .clone();
+    let mean = &p.prior().mean;
+    let nb = p.prior().n_basis;
+    let dense = p
+        .basis()
+        .resampled(req.promp.n_samples * req.options.verify_factor)
+        .unwrap();
+    let mut qp = Qp::new(mean.len());
+    let rows_of = |psi: DVector<f64>, j: usize| -> (DVector<f64>, f64) {
+        let block = l.rows(j * nb, nb);
+        (block.tr_mul(&psi), psi.dot(&mean.rows(j * nb, nb)))
+    };
+    let limits = robot.limits();
+    for basis in [p.basis(), &dense] {
+        for (i, _) in basis.phases().iter().enumerate() {
+            let psi = basis.matrix().row(i).transpose();
+            let dpsi = basis.derivative().row(i).transpose() / req.duration_s;
+            for (j, lim) in limits.iter().enumerate() {
+                let (a, c) = rows_of(psi.clone(), j);
+                qp.inequalities.push(Inequality {
+                    a: a.clone(),
+                    b: lim.upper - margin - c,
+                    penalty: None,
+                });
+                qp.inequalities.push(Inequality {
+                    a: -a,
+                    b: c - lim.lower - margin,
+                    penalty: None,
+                });
+                let (v, cv) = rows_of(dpsi.clone(), j);
+                qp.inequalities.push(Inequality {
+                    a: v.clone(),
+                    b: lim.velocity - cv,
+                    penalty: None,
+                });
+                qp.inequalities.push(Inequality {
+                    a: -v,
+                    b: lim.velocity + cv,
+                    penalty: None,
+                });
+            }
+        }
+    }
+    let psi0 = p.basis().matrix().row(0).transpose();
+    for (j, q0) in req.start.as_ref().unwrap().iter().enumerate() {
+        let (a, c) = rows_of(psi0.clone(), j);
+        qp.equalities.push((a, q0 - c));
+    }
+    let settings = QpSettings {
+        tolerance: 1e-10,
+        ..QpSettings::default()
+    };
+    let sol = qp.solve(&settings).unwrap();
+    mean + &l * sol.z
+}
+
+#[test]
+fn binding_limit_margins_match_one_clarabel_solve_of_the_whole_qp() {
+    let robot = Robot::panda().unwrap();
+    let margin = 0.25;
+    let mut binding = 0;
+    for (k, annotation) in real_priors().iter().enumerate() {
+        let req = request(annotation, &robot, margin);
+        let p = req.validate(&robot).unwrap();
+        if p.diagnose().is_some() {
+            continue;
+        }
+        let sol = p.solve(&SolveControl::default()).unwrap();
+        assert_eq!(sol.status, Status::Optimal, "prior {k}: {:?}", sol.reason);
+        let direct = direct_solve(&p, &req, &robot, margin);
+        let m_direct = p.mahalanobis(direct.as_slice());
+        let rel = (sol.mahalanobis.powi(2) - m_direct.powi(2)).abs() / m_direct.powi(2).max(1e-12);
+        assert!(
+            rel < 1e-7,
+            "prior {k}: cost {} vs direct {}",
+            sol.mahalanobis.powi(2),
+            m_direct.powi(2)
+        );
+        let worst = max_position_gap(&p, &sol.weights, direct.as_slice());
+        assert!(
+            worst < 1e-6,
+            "prior {k}: trajectory off the direct solve by {worst:e} rad"
+        );
+        // A margin that binds makes it cost more than the start alone.
+        let start_only = p.mahalanobis(conditioned(&p, &req).as_slice());
+        if sol.mahalanobis > start_only + 1e-6 {
+            binding += 1;
+        }
+    }
+    assert!(binding >= 1, "the margin binds on no prior");
+}
