@@ -131,6 +131,21 @@ proptest! {
         let min = scene.min_clearance(&robot, &frames).unwrap();
         let brute_min = everything.iter().map(|c| c.distance).fold(f64::INFINITY, f64::min);
         prop_assert!((min.distance - brute_min).abs() < 1e-6, "{} vs {brute_min}", min.distance);
+        // Branch and bound finds the same closest pair as the full list
+        // (first in its order on ties), or nothing when none is within.
+        let closest = scene.closest_within(&robot, &frames, activation);
+        let first_min = within.iter().fold(None::<&dpmp::scene::Clearance>, |best, c| match best {
+            Some(b) if b.distance <= c.distance => Some(b),
+            _ => Some(c),
+        });
+        match (closest, first_min) {
+            (None, None) => {}
+            (Some(a), Some(b)) => {
+                prop_assert_eq!((a.shape, a.obstacle), (b.shape, b.obstacle));
+                prop_assert!((a.distance - b.distance).abs() < 1e-12);
+            }
+            (a, b) => prop_assert!(false, "closest_within {:?} vs list {:?}", a.map(|c| c.distance), b.map(|c| c.distance)),
+        }
     }
 }
 

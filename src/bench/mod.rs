@@ -13,6 +13,7 @@ pub mod problem_file;
 pub mod report;
 pub mod runner;
 pub mod synth_target;
+pub mod typical_labels;
 pub mod witness;
 
 pub use make_problems::{make_problems, MakeSettings};

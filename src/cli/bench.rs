@@ -4,6 +4,7 @@
 //! - `dpmp bench --model DIR --data DIR [--split test] --out DIR [...]`: the
 //!   plan pipeline on a generated dataset (network prior, then each method)
 //! - `dpmp bench make-problems --out problems/ [--seed S] [--per-category N]`
+//! - `dpmp bench label-typical --out problems/typical/labels.json [--count N] [--restarts R]`
 
 use crate::bench::{self, method_from_name, MakeSettings, RunSettings, DEFAULT_METHODS};
 use crate::robot::Robot;
@@ -51,6 +52,22 @@ pub struct BenchArgs {
 pub enum BenchCommand {
     /// Generate the seeded problem suite.
     MakeProblems(MakeArgs),
+    /// Label the typical optimiser-benchmark problems with witnesses.
+    LabelTypical(LabelArgs),
+}
+
+/// Arguments of `dpmp bench label-typical`.
+#[derive(Debug, clap::Args)]
+pub struct LabelArgs {
+    /// Output file.
+    #[arg(long, default_value = "problems/typical/labels.json")]
+    pub out: PathBuf,
+    /// Typical problems (seeds 0..count).
+    #[arg(long, default_value_t = 100)]
+    pub count: usize,
+    /// Restarts per solve (the long search; at most 32).
+    #[arg(long, default_value_t = 32)]
+    pub restarts: usize,
 }
 
 /// Arguments of `dpmp bench make-problems`.
@@ -71,6 +88,7 @@ pub struct MakeArgs {
 pub fn run(args: BenchArgs) -> Result<()> {
     match args.command {
         Some(BenchCommand::MakeProblems(m)) => make(m),
+        Some(BenchCommand::LabelTypical(l)) => label(l),
         None => run_suite(args),
     }
 }
@@ -91,6 +109,30 @@ fn make(args: MakeArgs) -> Result<()> {
     eprintln!(
         "wrote {} problems to {}",
         problems.len(),
+        args.out.display()
+    );
+    Ok(())
+}
+
+fn label(args: LabelArgs) -> Result<()> {
+    if args.count == 0 {
+        return Err(Error::invalid("--count", "must be at least 1"));
+    }
+    let most = crate::optim::restart::MAX_RESTARTS;
+    if args.restarts > most {
+        return Err(Error::invalid(
+            "--restarts",
+            format!("must be in 0..={most}, got {}", args.restarts),
+        ));
+    }
+    let robot = Robot::panda()?;
+    let labels = bench::typical_labels::label_typical(&robot, args.count, args.restarts, true)
+        .map_err(super::as_flag_error)?;
+    labels.save(&args.out)?;
+    eprintln!(
+        "{} of {} typical problems labelled feasible (with witnesses) in {}",
+        labels.feasible(),
+        args.count,
         args.out.display()
     );
     Ok(())

@@ -29,7 +29,6 @@
 //! by its midpoint phase, which the optimiser adds to its grid.
 
 use super::problem::{Problem, FEASIBILITY_TOLERANCE};
-use super::verify::closest_of;
 use nalgebra::DMatrix;
 
 /// Bisections of one verification interval before it is flagged.
@@ -157,12 +156,10 @@ impl Problem {
             .copied()
             .collect();
         let frames = self.robot.fk(&q);
-        let clearance = closest_of(self.scene.clearances_within(
-            &self.robot,
-            &frames,
-            self.activation_m,
-        ))
-        .map_or(self.activation_m, |c| c.distance);
+        let clearance = self
+            .scene
+            .closest_within(&self.robot, &frames, self.activation_m)
+            .map_or(self.activation_m, |c| c.distance);
         Sample {
             z,
             q,

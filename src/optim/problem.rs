@@ -19,7 +19,7 @@ use nalgebra::{DMatrix, DVector};
 /// Tolerance (m, rad, ratio) within which a constraint counts as satisfied.
 pub const FEASIBILITY_TOLERANCE: f64 = 1e-6;
 /// Default distance beyond `clearance_m` within which pairs are linearised.
-pub const DEFAULT_ACTIVATION_MARGIN_M: f64 = 0.02;
+pub const DEFAULT_ACTIVATION_MARGIN_M: f64 = 0.01;
 
 /// A validated request: prior, whitening, robot, scene and constraints.
 /// `Clone + Send + Sync`; solving does not mutate it.

@@ -98,7 +98,7 @@ pub struct SolverOptions {
     /// Largest number of SCP iterations (QPs).
     pub max_iterations: usize,
     /// Robot-obstacle pairs closer than this (m) are linearised (default:
-    /// `clearance_m + 0.02`); must be >= `clearance_m`.
+    /// `clearance_m + 0.01`); must be >= `clearance_m`.
     pub activation_distance_m: Option<f64>,
     /// Dense verification samples per optimisation sample (>= 4).
     pub verify_factor: usize,

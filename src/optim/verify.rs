@@ -131,10 +131,8 @@ impl Problem {
             .par_iter()
             .map(|qp| {
                 let frames = self.robot.fk(qp);
-                closest_of(
-                    self.scene
-                        .clearances_within(&self.robot, &frames, self.activation_m),
-                )
+                self.scene
+                    .closest_within(&self.robot, &frames, self.activation_m)
             })
             .collect();
         let per_phase: Vec<Option<Clearance>> = if near.iter().any(|c| c.is_some()) {
@@ -211,15 +209,4 @@ impl Problem {
             points,
         }
     }
-}
-
-/// The smallest-distance clearance of a list (first on ties).
-pub(crate) fn closest_of(list: Vec<Clearance>) -> Option<Clearance> {
-    let mut best: Option<Clearance> = None;
-    for c in list {
-        if best.as_ref().is_none_or(|b| c.distance < b.distance) {
-            best = Some(c);
-        }
-    }
-    best
 }

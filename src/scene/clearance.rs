@@ -171,6 +171,42 @@ impl Scene {
         out
     }
 
+    /// The closest (robot primitive, obstacle) pair closer than
+    /// `activation_m` (signed): the minimum of [`Scene::clearances_within`]
+    /// (first in its order on ties), found by branch and bound — each pair
+    /// is computed only while its lower bounds do not rule it out against
+    /// the closest pair found so far.
+    pub fn closest_within(
+        &self,
+        robot: &Robot,
+        frames: &Frames,
+        activation_m: f64,
+    ) -> Option<Clearance> {
+        if self.is_empty() || !activation_m.is_finite() {
+            return None;
+        }
+        let all = self.bounds?;
+        let mut limit = activation_m;
+        let mut best = None;
+        for shape in place_robot(robot, frames) {
+            if ruled_out(shape.bounds.gap(&all), limit) {
+                continue;
+            }
+            for (k, obstacle) in self.compiled.iter().enumerate() {
+                if ruled_out(shape.bounds.gap(&obstacle.bounds), limit) {
+                    continue;
+                }
+                if let Some(contact) = obstacle_contact(&shape, obstacle, limit) {
+                    if contact.distance < limit {
+                        limit = contact.distance;
+                        best = Some((shape.index, k, contact));
+                    }
+                }
+            }
+        }
+        best.map(|(shape, k, contact)| self.clearance(robot, shape, k, &contact))
+    }
+
     /// The signed distance of one (robot primitive, obstacle) pair at
     /// `frames`, however far apart; `None` for an index out of range.
     pub fn pair_clearance(
