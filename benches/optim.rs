@@ -70,6 +70,7 @@ fn sweep(robot: &Robot, requests: &[OptimizeRequest], inner: InnerSolver) {
         })
         .collect();
     let mut active_set_steps = Vec::new();
+    let mut ms_per_qp = Vec::new();
     let mut solve_ms = Vec::new();
     let mut total_ms = Vec::new();
     let mut iterations = Vec::new();
@@ -102,6 +103,9 @@ fn sweep(robot: &Robot, requests: &[OptimizeRequest], inner: InnerSolver) {
                     / (sol.stats.qp_solves - sol.stats.active_set_solves) as f64,
             );
         }
+        if sol.stats.qp_solves > 0 {
+            ms_per_qp.push(sol.stats.qp_ms / sol.stats.qp_solves as f64);
+        }
         split[0] += sol.stats.qp_ms;
         split[1] += sol.stats.evaluation_ms;
         split[2] += sol.stats.verification_ms;
@@ -119,6 +123,7 @@ fn sweep(robot: &Robot, requests: &[OptimizeRequest], inner: InnerSolver) {
         &mut solves,
         &mut ipm_per_qp,
         &mut active_set_steps,
+        &mut ms_per_qp,
     ] {
         v.sort_by(|a, b| a.total_cmp(b));
     }
@@ -155,6 +160,11 @@ fn sweep(robot: &Robot, requests: &[OptimizeRequest], inner: InnerSolver) {
             percentile(&ipm_per_qp, 0.5)
         );
     }
+    println!(
+        "  QP linearisation + assembly + solve per QP: median {:.3} ms p99 {:.3} ms",
+        percentile(&ms_per_qp, 0.5),
+        percentile(&ms_per_qp, 0.99)
+    );
     if !active_set_steps.is_empty() {
         println!(
             "  active-set multiplier steps per solve median {:.1} p99 {:.1}",

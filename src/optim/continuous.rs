@@ -28,7 +28,8 @@
 //! [`MAX_BISECTIONS`] times. An interval that still falls short is reported
 //! by its midpoint phase, which the optimiser adds to its grid.
 
-use super::problem::{Problem, FEASIBILITY_TOLERANCE};
+use super::problem::Problem;
+use super::tolerances::FEASIBILITY_TOLERANCE;
 use nalgebra::DMatrix;
 
 /// Bisections of one verification interval before it is flagged.

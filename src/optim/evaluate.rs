@@ -3,15 +3,13 @@
 //! the goal residual, the limit rows, and the merit the step test uses.
 
 use super::phases::PhaseRows;
-use super::problem::{Problem, FEASIBILITY_TOLERANCE};
-use super::scp::{buffered_tolerance, CLEARANCE_BUFFER_M};
+use super::problem::Problem;
+use super::scp::buffered_tolerance;
+use super::tolerances::{CLEARANCE_BUFFER_M, FEASIBILITY_TOLERANCE, LINEAR_TOLERANCE};
 use crate::robot::Frames;
 use crate::scene::Clearance;
 use nalgebra::{DVector, Vector3};
 use rayon::prelude::*;
-
-/// Linear rows count as satisfied within this (rad, rad/s).
-pub(super) const LINEAR_TOLERANCE: f64 = 1e-7;
 
 /// Constraint values at one iterate on the optimisation phases.
 pub(super) struct GridEval {

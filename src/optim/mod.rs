@@ -14,6 +14,7 @@
 //! - [`nullspace`] — equality rows eliminated before Clarabel sees a QP.
 //! - [`scp`] — the trust-region SCP driver, [`SolveControl`], [`Solution`].
 //! - `scp_state` — the driver's state struct and its named steps.
+//! - [`tolerances`] — every tolerance and convergence threshold.
 //! - [`restart`] — restarts from seeded prior draws after a local minimum.
 //! - `evaluate` — one iterate on the optimisation phases: clearances, goal, merit.
 //! - `subproblem` — one QP: linearisation, working set, constraint generation.
@@ -44,17 +45,19 @@ pub mod sampling;
 pub mod scp;
 mod scp_state;
 mod subproblem;
+pub mod tolerances;
 pub mod verify;
 pub mod whiten;
 pub mod working_set;
 
-pub use problem::{Problem, FEASIBILITY_TOLERANCE};
+pub use problem::Problem;
 pub use report::{
     Closest, JointTrajectory, OptimizeResponse, SampleResult, Status, TrajectoryPoint,
     TrajectoryReport,
 };
 pub use request::{Goal, InnerSolver, OptimizeRequest, PriorSpec, SolverOptions};
 pub use scp::{Solution, SolveControl, SolveStats};
+pub use tolerances::FEASIBILITY_TOLERANCE;
 
 use crate::robot::Robot;
 use crate::Result;

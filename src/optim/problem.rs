@@ -8,6 +8,7 @@ use super::request::{
     MAX_OBSTACLES, MAX_PHASE_SAMPLES,
 };
 use super::restart::MAX_RESTARTS;
+use super::tolerances::FEASIBILITY_TOLERANCE;
 use super::whiten::Whitening;
 use crate::promp::annotation::{prior_from_joints, REPAIR_FLOOR_RELATIVE};
 use crate::promp::{repair_covariance, Basis, WeightDistribution};
@@ -16,8 +17,6 @@ use crate::scene::Scene;
 use crate::{error::ensure_finite, Error, Result};
 use nalgebra::{DMatrix, DVector};
 
-/// Tolerance (m, rad, ratio) within which a constraint counts as satisfied.
-pub const FEASIBILITY_TOLERANCE: f64 = 1e-6;
 /// Default distance beyond `clearance_m` within which pairs are linearised.
 pub const DEFAULT_ACTIVATION_MARGIN_M: f64 = 0.01;
 

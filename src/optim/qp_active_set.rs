@@ -25,18 +25,11 @@
 use super::dual_active_set::{self as das, Row};
 use super::nullspace::NullSpace;
 use super::qp::{Cone, Qp, QpFailure, QpSolution};
+use super::tolerances::{CONE_TOLERANCE, TRUST_FILL, TRUST_OVERSHOOT};
 use nalgebra::DVector;
 
 /// Tangent cuts per cone at most.
 pub const MAX_CONE_CUTS: usize = 6;
-/// A cone broken by more than this (its units) at a solution gets a cut.
-const CONE_TOLERANCE: f64 = 1e-9;
-/// The proximal search stops once the step fills this fraction of the
-/// ball (the SCP counts such a step as held by the ball).
-pub const TRUST_FILL: f64 = 0.6;
-/// A step this fraction longer than the radius is accepted (the ball only
-/// limits the step; it need not hold exactly).
-pub const TRUST_OVERSHOOT: f64 = 0.25;
 /// Proximal solves per QP at most.
 const MAX_PROXIMAL_SOLVES: usize = 12;
 

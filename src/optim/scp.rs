@@ -33,6 +33,7 @@ use super::problem::Problem;
 use super::qp::{QpFailure, QpSolution};
 use super::report::{Status, TrajectoryReport};
 use super::scp_state::Scp;
+use super::tolerances::CLEARANCE_BUFFER_M;
 use super::verify::Verification;
 use crate::{Error, Result};
 use nalgebra::DVector;
@@ -40,27 +41,11 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
 
-/// Clearance the QP aims for beyond `clearance_m` (m), so that small
-/// linearisation and sampling errors do not leave the true trajectory just
-/// short of the requirement.
-pub const CLEARANCE_BUFFER_M: f64 = 2e-4;
 /// Goal tolerance the QP aims for: `tolerance_m` less a buffer of
 /// [`CLEARANCE_BUFFER_M`] (at most half the tolerance), for the same reason.
 pub(super) fn buffered_tolerance(tolerance_m: f64) -> f64 {
     tolerance_m - CLEARANCE_BUFFER_M.min(0.5 * tolerance_m)
 }
-/// Largest L1 penalty before slack is declared irreducible.
-pub const MAX_PENALTY: f64 = 1e6;
-/// An iterate whose next step is predicted to improve the merit by less
-/// than this fraction of it has converged when feasible (the tail of SCP
-/// on curved constraints is linear; this stops it at a relative cost error
-/// of about this size) and has stalled when not (exact generation or a
-/// larger penalty follows).
-pub(super) const OPTIMALITY_TOLERANCE: f64 = 1e-3;
-/// Largest trust-region half-width.
-pub const MAX_TRUST_REGION: f64 = 1e3;
-/// Smallest trust-region half-width before the iteration counts as stalled.
-pub const MIN_TRUST_REGION: f64 = 1e-4;
 /// Most phases added per dense verification round.
 const MAX_ADDED_PER_ROUND: usize = 64;
 

@@ -33,18 +33,14 @@ use super::phases::PhaseRows;
 use super::problem::Problem;
 use super::qp::{ClarabelInfo, QpFailure, QpSolution};
 use super::report::{FinalQp, Status};
-use super::scp::{
-    timed, Solution, SolveControl, SolveStats, StepTrial, MAX_PENALTY, MAX_TRUST_REGION,
-    MIN_TRUST_REGION, OPTIMALITY_TOLERANCE,
-};
+use super::scp::{timed, Solution, SolveControl, SolveStats, StepTrial};
 use super::subproblem::{ActiveRows, Linearisation};
+use super::tolerances::{
+    BALL_ACTIVE_FRACTION, MAX_PENALTY, MAX_TRUST_REGION, MIN_TRUST_REGION, OPTIMALITY_TOLERANCE,
+};
 use crate::Result;
 use nalgebra::DVector;
 use std::time::Instant;
-
-/// A certifying step longer than this fraction of the trust radius counts
-/// as held by the ball (not a KKT point of the linearised problem).
-const BALL_ACTIVE_FRACTION: f64 = 0.99;
 
 /// What one iteration's QP produced.
 struct Step {

@@ -7,17 +7,15 @@ use super::linear::{RowKind, RowRef};
 use super::phases::PhaseRows;
 use super::problem::Problem;
 use super::qp::{Cone, Inequality, Qp, QpFailure, QpSettings, QpSolution};
-use super::scp::{buffered_tolerance, SolveControl, SolveStats, CLEARANCE_BUFFER_M};
+use super::scp::{buffered_tolerance, SolveControl, SolveStats};
+use super::tolerances::{
+    ACTIVE_DUAL_FRACTION, CERTIFY_TIGHTENING, CLEARANCE_BAND_M, CLEARANCE_BUFFER_M,
+    GENERATION_TOLERANCE,
+};
 use super::working_set::{thin_in_time, Candidate};
 use nalgebra::{DMatrix, DVector};
 use std::collections::HashSet;
 
-/// Clearance rows within this much of the target (m) start in the working
-/// set of each QP; the rest join by constraint generation.
-const CLEARANCE_BAND_M: f64 = 3e-3;
-/// A candidate row the QP solution breaks by more than this (rad, rad/s or
-/// m) joins the working set.
-const GENERATION_TOLERANCE: f64 = 1e-8;
 /// Generation rounds of clearance rows per QP while the iterate is being
 /// improved; limit rows are always generated to the end. One round (the
 /// working set as it stands) keeps QPs small in the early iterations, when
@@ -328,12 +326,6 @@ impl<'c> WorkingQp<'c> {
     }
 }
 
-/// The final QP is solved [`CERTIFY_TIGHTENING`] times tighter than
-/// `options.qp_tolerance` (at least 1e-12), so that on a convex problem
-/// the answer meets the closed form to about 1e-8; if Clarabel cannot reach
-/// that, at the requested tolerance.
-const CERTIFY_TIGHTENING: f64 = 1e-2;
-
 fn certifying_solve(qp: &Qp, settings: &QpSettings) -> Result<QpSolution, QpFailure> {
     let tight = QpSettings {
         tolerance: (settings.tolerance * CERTIFY_TIGHTENING).max(1e-12),
@@ -382,9 +374,6 @@ pub(super) struct ActiveRows {
     /// (phase index, robot shape, obstacle).
     clearance: HashSet<(usize, usize, usize)>,
 }
-
-/// Multipliers below this fraction of the largest one count as inactive.
-const ACTIVE_DUAL_FRACTION: f64 = 1e-6;
 
 /// Where a subproblem is linearised.
 #[derive(Clone, Copy)]

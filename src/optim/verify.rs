@@ -4,8 +4,9 @@
 //! between the samples ([`super::continuous`]). The report the user sees
 //! always comes from here.
 
-use super::problem::{Problem, FEASIBILITY_TOLERANCE};
+use super::problem::Problem;
 use super::report::{Closest, JointTrajectory, TrajectoryPoint, TrajectoryReport};
+use super::tolerances::FEASIBILITY_TOLERANCE;
 use crate::scene::Clearance;
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
