@@ -4,7 +4,7 @@
 
 use super::phases::PhaseRows;
 use super::problem::Problem;
-use super::scp::buffered_tolerance;
+use super::tolerances::buffered_tolerance;
 use super::tolerances::{CLEARANCE_BUFFER_M, FEASIBILITY_TOLERANCE, LINEAR_TOLERANCE};
 use crate::robot::Frames;
 use crate::scene::Clearance;

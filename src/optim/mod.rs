@@ -12,8 +12,9 @@
 //! - [`dual_active_set`] — the warm-started inner QP solver (Goldfarb–Idnani).
 //! - [`qp_active_set`] — a [`qp::Qp`] solved by it (the SCP's intermediate steps).
 //! - [`nullspace`] — equality rows eliminated before Clarabel sees a QP.
-//! - [`scp`] — the trust-region SCP driver, [`SolveControl`], [`Solution`].
+//! - [`scp`] — the entry points of the SCP: solve towards the prior mean, project a draw.
 //! - `scp_state` — the driver's state struct and its named steps.
+//! - [`solution`] — [`Solution`], [`SolveStats`], [`SolveControl`].
 //! - [`tolerances`] — every tolerance and convergence threshold.
 //! - [`restart`] — restarts from seeded prior draws after a local minimum.
 //! - `evaluate` — one iterate on the optimisation phases: clearances, goal, merit.
@@ -44,6 +45,7 @@ pub mod restart;
 pub mod sampling;
 pub mod scp;
 mod scp_state;
+pub mod solution;
 mod subproblem;
 pub mod tolerances;
 pub mod verify;
@@ -56,7 +58,7 @@ pub use report::{
     TrajectoryReport,
 };
 pub use request::{Goal, InnerSolver, OptimizeRequest, PriorSpec, SolverOptions};
-pub use scp::{Solution, SolveControl, SolveStats};
+pub use solution::{Solution, SolveControl, SolveStats};
 pub use tolerances::FEASIBILITY_TOLERANCE;
 
 use crate::robot::Robot;

@@ -5,9 +5,8 @@ use super::linear::LinearSet;
 use super::phases::PhaseRows;
 use super::request::{
     Goal, OptimizeRequest, PriorSpec, SolverOptions, MAX_DURATION_S, MAX_EXTRA_SAMPLES,
-    MAX_OBSTACLES, MAX_PHASE_SAMPLES,
+    MAX_OBSTACLES, MAX_PHASE_SAMPLES, MAX_RESTARTS,
 };
-use super::restart::MAX_RESTARTS;
 use super::tolerances::FEASIBILITY_TOLERANCE;
 use super::whiten::Whitening;
 use crate::promp::annotation::{prior_from_joints, REPAIR_FLOOR_RELATIVE};

@@ -11,6 +11,8 @@ pub const MAX_OBSTACLES: usize = 1000;
 pub const MAX_EXTRA_SAMPLES: usize = 100;
 /// Largest accepted `promp.n_samples`.
 pub const MAX_PHASE_SAMPLES: usize = 2000;
+/// Largest accepted `options.restarts`.
+pub const MAX_RESTARTS: usize = 32;
 /// Largest accepted `duration_s`.
 pub const MAX_DURATION_S: f64 = 600.0;
 

@@ -24,15 +24,14 @@
 
 use super::problem::Problem;
 use super::report::Status;
-use super::scp::{Solution, SolveControl, SolveStats};
+use super::solution::{Solution, SolveControl, SolveStats};
 use crate::Result;
 use nalgebra::DVector;
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 
-/// Largest accepted `options.restarts`.
-pub const MAX_RESTARTS: usize = 32;
+pub use super::request::MAX_RESTARTS;
 /// Iteration limit of one restart (less when `options.max_iterations` is).
 pub const RESTART_MAX_ITERATIONS: usize = 40;
 /// Mixed into `options.seed` so that the restart draws are not the

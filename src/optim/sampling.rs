@@ -4,7 +4,7 @@
 
 use super::problem::Problem;
 use super::report::{SampleResult, Status};
-use super::scp::SolveControl;
+use super::solution::SolveControl;
 use crate::Result;
 use nalgebra::DVector;
 use rand::SeedableRng;

@@ -7,7 +7,8 @@ use super::linear::{RowKind, RowRef};
 use super::phases::PhaseRows;
 use super::problem::Problem;
 use super::qp::{Cone, Inequality, Qp, QpFailure, QpSettings, QpSolution};
-use super::scp::{buffered_tolerance, SolveControl, SolveStats};
+use super::solution::{SolveControl, SolveStats};
+use super::tolerances::buffered_tolerance;
 use super::tolerances::{
     ACTIVE_DUAL_FRACTION, CERTIFY_TIGHTENING, CLEARANCE_BAND_M, CLEARANCE_BUFFER_M,
     GENERATION_TOLERANCE,

@@ -16,6 +16,12 @@ pub const LINEAR_TOLERANCE: f64 = 1e-7;
 /// short of the requirement.
 pub const CLEARANCE_BUFFER_M: f64 = 2e-4;
 
+/// Goal tolerance the QP aims for: `tolerance_m` less a buffer of
+/// [`CLEARANCE_BUFFER_M`] (at most half the tolerance), for the same reason.
+pub fn buffered_tolerance(tolerance_m: f64) -> f64 {
+    tolerance_m - CLEARANCE_BUFFER_M.min(0.5 * tolerance_m)
+}
+
 // SCP convergence and trust region.
 
 /// An iterate whose next step is predicted to improve the merit by less
