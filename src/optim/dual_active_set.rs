@@ -78,6 +78,10 @@ pub struct Settings {
     pub max_steps: usize,
     /// Refactor the active set's QR after this many updates.
     pub refactor_every: usize,
+    /// Every row's cap is multiplied by this (> 0): the same rows serve a
+    /// family of problems whose objective is scaled (the SCP's proximal
+    /// trust term), without copying them.
+    pub cap_scale: f64,
 }
 
 impl Default for Settings {
@@ -86,6 +90,7 @@ impl Default for Settings {
             tolerance: 1e-11,
             max_steps: 0,
             refactor_every: 64,
+            cap_scale: 1.0,
         }
     }
 }
@@ -120,6 +125,8 @@ pub struct Solution {
     pub objective: f64,
     /// Multiplier steps taken (full and partial).
     pub steps: usize,
+    /// The [`Settings::cap_scale`] the caps were multiplied by.
+    pub cap_scale: f64,
 }
 
 impl Solution {
@@ -142,7 +149,7 @@ impl Solution {
         for (row, &lambda) in rows.iter().zip(&self.multipliers) {
             gradient.axpy(lambda, &row.a, 1.0);
             let s = (row.a.dot(&self.x) - row.b) / row.a.norm().max(f64::MIN_POSITIVE);
-            let cap = row.cap.unwrap_or(f64::INFINITY);
+            let cap = row.cap.map_or(f64::INFINITY, |u| u * self.cap_scale);
             worst = worst.max(-lambda).max(lambda - cap);
             if row.cap.is_none() {
                 worst = worst.max(s);
@@ -205,10 +212,10 @@ pub fn solve(
     settings: &Settings,
     warm: &WarmStart,
 ) -> Result<Solution, Failure> {
-    check_input(centre, rows)?;
+    check_input(centre, rows, settings)?;
     let mut solver = DualActiveSet::new(centre, rows, settings);
     for &i in &warm.saturated {
-        if rows.get(i).is_some_and(|r| r.cap.is_some()) && solver.state[i] == State::Inactive {
+        if solver.cap(i).is_some() && solver.state[i] == State::Inactive {
             solver.settle(i, false, true);
         }
     }
@@ -224,8 +231,14 @@ pub fn solve(
     Ok(solver.into_solution())
 }
 
-fn check_input(centre: &DVector<f64>, rows: &[Row]) -> Result<(), Failure> {
+fn check_input(centre: &DVector<f64>, rows: &[Row], settings: &Settings) -> Result<(), Failure> {
     let n = centre.len();
+    if !(settings.cap_scale.is_finite() && settings.cap_scale > 0.0) {
+        return Err(Failure::BadInput(format!(
+            "cap_scale must be finite and > 0, got {}",
+            settings.cap_scale
+        )));
+    }
     if !centre.iter().all(|v| v.is_finite()) {
         return Err(Failure::BadInput("centre has a non-finite entry".into()));
     }
@@ -294,6 +307,11 @@ impl<'a> DualActiveSet<'a> {
         self.centre.len()
     }
 
+    /// Row `i`'s multiplier bound (scaled), `None` for a hard row.
+    fn cap(&self, i: usize) -> Option<f64> {
+        self.rows[i].cap.map(|u| u * self.settings.cap_scale)
+    }
+
     /// The sense in which row `i` is violated beyond the tolerance, if it is.
     fn violation_sense(&self, i: usize) -> Option<f64> {
         let v = self.scaled_violation(i);
@@ -342,7 +360,7 @@ impl<'a> DualActiveSet<'a> {
     fn add_row(&mut self, p: usize, sign: f64) -> Result<(), Failure> {
         let normal = &self.rows[p].a * sign;
         let rhs = self.rows[p].b * sign;
-        let cap = self.rows[p].cap;
+        let cap = self.cap(p);
         let mut mult = 0.0;
         loop {
             self.steps += 1;
@@ -408,7 +426,7 @@ impl<'a> DualActiveSet<'a> {
             if rk > 0.0 {
                 consider(a.mult / rk, Event::Release(k));
             } else if rk < 0.0 {
-                if let Some(u) = self.rows[a.row].cap {
+                if let Some(u) = self.cap(a.row) {
                     consider((u - a.mult) / -rk, Event::Cap(k));
                 }
             }
@@ -507,7 +525,7 @@ impl<'a> DualActiveSet<'a> {
     /// centre consistent; `was_shifted`: its `-u a` is in the centre now
     /// (it was saturated, or active in the reverse sense).
     fn settle(&mut self, i: usize, was_shifted: bool, saturated: bool) {
-        let u = self.rows[i].cap.unwrap_or(0.0);
+        let u = self.cap(i).unwrap_or(0.0);
         match (was_shifted, saturated) {
             (false, true) => self.shifted.axpy(-u, &self.rows[i].a, 1.0),
             (true, false) => self.shifted.axpy(u, &self.rows[i].a, 1.0),
@@ -572,18 +590,21 @@ impl<'a> DualActiveSet<'a> {
         let mut multipliers = vec![0.0; self.rows.len()];
         for (i, s) in self.state.iter().enumerate() {
             if *s == State::Saturated {
-                multipliers[i] = self.rows[i].cap.unwrap_or(0.0);
+                multipliers[i] = self.cap(i).unwrap_or(0.0);
             }
         }
         for a in &self.active {
-            let u = self.rows[a.row].cap.unwrap_or(0.0);
+            let u = self.cap(a.row).unwrap_or(0.0);
             multipliers[a.row] = if a.sign > 0.0 { a.mult } else { u - a.mult };
         }
         let objective = 0.5 * (&self.x - self.centre).norm_squared()
             + self
                 .rows
                 .iter()
-                .filter_map(|r| r.cap.map(|u| u * (r.a.dot(&self.x) - r.b).max(0.0)))
+                .filter_map(|r| {
+                    r.cap
+                        .map(|u| u * self.settings.cap_scale * (r.a.dot(&self.x) - r.b).max(0.0))
+                })
                 .sum::<f64>();
         Solution {
             active: self.active.iter().map(|a| a.row).collect(),
@@ -594,6 +615,7 @@ impl<'a> DualActiveSet<'a> {
             multipliers,
             objective,
             steps: self.steps,
+            cap_scale: self.settings.cap_scale,
         }
     }
 }
@@ -603,7 +625,9 @@ fn givens(a: f64, b: f64) -> (f64, f64) {
     if b == 0.0 {
         return (1.0, 0.0);
     }
-    let h = a.hypot(b);
+    // Moderate magnitudes (normals and multipliers): no overflow guard
+    // needed, and `hypot` is several times slower.
+    let h = (a * a + b * b).sqrt();
     (a / h, b / h)
 }
 

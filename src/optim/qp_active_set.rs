@@ -95,28 +95,27 @@ impl Qp {
         }
     }
 
-    /// The rows and centre of the problem with proximal weight `mu`, scaled
-    /// to the active-set solver's `½|x - c_μ|² + Σ u s`.
-    fn proximal_rows(&self, cuts: &[Row], mu: f64) -> (DVector<f64>, Vec<Row>) {
-        let scale = 1.0 / (2.0 * (1.0 + mu));
-        let centre = match &self.trust {
-            Some((zk, _)) if mu > 0.0 => (&self.center + zk * mu) / (1.0 + mu),
-            _ => self.center.clone(),
-        };
-        let rows = self
-            .inequalities
+    /// The rows (inequalities, then cuts; caps at the penalties) and the
+    /// centre of the problem with proximal weight `mu`; the caps are scaled
+    /// by [`cap_scale`] to the active-set solver's `½|x - c_μ|² + Σ u s`.
+    fn active_set_rows(&self, cuts: &[Row]) -> Vec<Row> {
+        self.inequalities
             .iter()
             .map(|ineq| Row {
                 a: ineq.a.clone(),
                 b: ineq.b,
-                cap: ineq.penalty.map(|rho| rho * scale),
+                cap: ineq.penalty,
             })
-            .chain(cuts.iter().map(|cut| Row {
-                cap: cut.cap.map(|rho| rho * scale),
-                ..cut.clone()
-            }))
-            .collect();
-        (centre, rows)
+            .chain(cuts.iter().cloned())
+            .collect()
+    }
+
+    /// The cost centre `(c + μ z_k) / (1 + μ)` with proximal weight `mu`.
+    fn proximal_centre(&self, mu: f64) -> DVector<f64> {
+        match &self.trust {
+            Some((zk, _)) if mu > 0.0 => (&self.center + zk * mu) / (1.0 + mu),
+            _ => self.center.clone(),
+        }
     }
 
     /// The optimum within the trust ball, to within [`TRUST_FILL`]`Δ ..
@@ -132,9 +131,13 @@ impl Qp {
         mu_hint: f64,
         steps: &mut usize,
     ) -> Result<Proximal, QpFailure> {
+        let rows = self.active_set_rows(cuts);
         let mut solve_at = |mu: f64, warm: &das::WarmStart| -> Result<Proximal, QpFailure> {
-            let (centre, rows) = self.proximal_rows(cuts, mu);
-            let sol = das::solve(&centre, &rows, &das::Settings::default(), warm)
+            let settings = das::Settings {
+                cap_scale: cap_scale(mu),
+                ..das::Settings::default()
+            };
+            let sol = das::solve(&self.proximal_centre(mu), &rows, &settings, warm)
                 .map_err(active_set_failure)?;
             *steps += sol.steps;
             Ok(Proximal { sol, mu })
@@ -229,6 +232,12 @@ impl Qp {
             clarabel: None,
         }
     }
+}
+
+/// The caps' scale with proximal weight `mu`: `|z - c|² + μ|z - z_k|² + Σρ s`
+/// is `2 (1 + μ)` times `½|z - c_μ|² + Σ ρ / (2 (1 + μ)) s`.
+fn cap_scale(mu: f64) -> f64 {
+    1.0 / (2.0 * (1.0 + mu))
 }
 
 /// The next proximal weight to try, aiming at a step of `radius`: the

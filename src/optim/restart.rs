@@ -19,8 +19,10 @@
 //! successful restarts on the typical problems mostly need 7-35), so that a
 //! problem with no feasible answer costs a bounded multiple of one run.
 //! Nothing restarts after a proof of infeasibility, after an `optimal`
-//! answer, or once the deadline or the cancel flag has stopped the solve;
-//! a stop during the restarts answers with the first run's iterate.
+//! answer, or once the deadline or the cancel flag has stopped the solve.
+//! A stop during the restarts still answers with the closest restart that
+//! had already verified `optimal`, if any (the best verified trajectory
+//! found within the budget), else with the first run's iterate.
 
 use super::problem::Problem;
 use super::report::Status;
@@ -66,25 +68,26 @@ impl Problem {
         for run in &runs {
             spent.add(run);
         }
-        if let Some(why) = ctl.stop_reason() {
-            let note = format!("restarts stopped: {why}");
-            return Ok(spent.onto(first, note));
-        }
+        let stopped = ctl.stop_reason();
         let best = runs
             .into_iter()
             .enumerate()
             .filter(|(_, r)| r.status == Status::Optimal)
             .min_by(|(i, a), (j, b)| a.mahalanobis.total_cmp(&b.mahalanobis).then(i.cmp(j)));
-        match best {
-            Some((k, sol)) => {
-                let note = format!(
+        match (best, stopped) {
+            (Some((k, sol)), _) => {
+                let mut note = format!(
                     "the run from the prior mean found no feasible solution ({}); of {restarts} restarts from seeded prior draws, restart {} found the closest feasible one: a local optimum, a feasible solution closer to the prior may exist",
                     first.reason.as_deref().unwrap_or("no reason given"),
                     k + 1
                 );
+                if let Some(why) = stopped {
+                    note.push_str(&format!(" (the other restarts were stopped: {why})"));
+                }
                 Ok(spent.onto(sol, note))
             }
-            None => {
+            (None, Some(why)) => Ok(spent.onto(first, format!("restarts stopped: {why}"))),
+            (None, None) => {
                 let note = format!(
                     "{restarts} restarts from seeded prior draws found no feasible solution either"
                 );
