@@ -2,6 +2,7 @@
 //! iterate, assembled into a [`Qp`] over a [working set](super::working_set)
 //! of rows and solved by constraint generation.
 
+use super::dual_active_set::WarmStart;
 use super::evaluate::GridEval;
 use super::linear::{RowKind, RowRef};
 use super::phases::PhaseRows;
@@ -53,7 +54,7 @@ impl Problem {
             ..Default::default()
         };
         let mut round = 0;
-        let mut warm = super::dual_active_set::WarmStart::default();
+        let mut warm = work.carried_states(hint);
         let mut mu = at.proximal_hint;
         loop {
             round += 1;
@@ -323,7 +324,34 @@ impl<'c> WorkingQp<'c> {
                 _ => {}
             }
         }
+        if let Some(states) = &sol.row_states {
+            for &k in &states.saturated {
+                if let RowId::Clearance(i) = self.ids[k] {
+                    out.saturated.insert(self.clearance[i].id());
+                }
+            }
+        }
         out
+    }
+
+    /// The previous QP's row states carried to this one by row identity:
+    /// its saturated clearance rows start saturated, its other active rows
+    /// are made feasible first.
+    fn carried_states(&self, hint: &ActiveRows) -> WarmStart {
+        let mut warm = WarmStart::default();
+        for (k, id) in self.ids.iter().enumerate() {
+            match *id {
+                RowId::Clearance(i) if hint.saturated.contains(&self.clearance[i].id()) => {
+                    warm.saturated.push(k)
+                }
+                RowId::Clearance(i) if hint.clearance.contains(&self.clearance[i].id()) => {
+                    warm.active.push(k)
+                }
+                RowId::Linear(r) if hint.linear.contains(&r) => warm.active.push(k),
+                _ => {}
+            }
+        }
+        warm
     }
 }
 
@@ -374,6 +402,9 @@ pub(super) struct ActiveRows {
     linear: Vec<RowRef>,
     /// (phase index, robot shape, obstacle).
     clearance: HashSet<(usize, usize, usize)>,
+    /// Clearance rows whose multiplier was at its cap (the active-set
+    /// path's saturated rows): the next QP starts them saturated.
+    saturated: HashSet<(usize, usize, usize)>,
 }
 
 /// Where a subproblem is linearised.
