@@ -220,7 +220,7 @@ fn run_preview(a: PreviewArgs) -> Result<()> {
     for (record, image) in output.records.iter().zip(&output.images) {
         let path = a.out.join(format!("{}.png", record.id));
         write_png_atomic(&path, image)?;
-        println!("{}", path.display());
+        crate::cli::write_stdout(&path.display().to_string())?;
     }
     Ok(())
 }

@@ -60,7 +60,6 @@ pub fn run(args: EvalArgs) -> crate::Result<()> {
     if args.format == "json" {
         crate::cli::print_json(&report)
     } else {
-        println!("{}", to_markdown(&report));
-        Ok(())
+        crate::cli::write_stdout(&to_markdown(&report))
     }
 }

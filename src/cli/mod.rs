@@ -88,8 +88,22 @@ pub fn run(command: Command) -> crate::Result<()> {
 pub fn print_json<T: serde::Serialize>(value: &T) -> crate::Result<()> {
     let text = serde_json::to_string_pretty(value)
         .map_err(|e| crate::Error::Numerical(format!("cannot serialise output: {e}")))?;
-    println!("{text}");
-    Ok(())
+    write_stdout(&text)
+}
+
+/// Write `text` and a newline to standard output. A reader that closed the
+/// pipe early (`dpmp ... | head`) is not an error; any other write failure
+/// is reported, never a panic.
+pub(crate) fn write_stdout(text: &str) -> crate::Result<()> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    match writeln!(out, "{text}").and_then(|_| out.flush()) {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(crate::Error::file(
+            std::path::Path::new("<stdout>"),
+            format!("cannot write the output: {e}"),
+        )),
+        _ => Ok(()),
+    }
 }
 
 /// Read and parse a JSON file, naming the file (and the serde location) on error.
