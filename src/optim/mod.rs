@@ -3,8 +3,9 @@
 //! whose trajectory respects the joint position and velocity limits, the
 //! start configuration, the goal and the clearance to every obstacle.
 //!
-//! - [`request`] — [`OptimizeRequest`] (DESIGN.md's JSON) and [`SolverOptions`].
-//! - [`problem`] — validation into a whitened [`Problem`].
+//! - [`request`] — [`OptimizeRequest`] (DESIGN.md's JSON), [`SolverOptions`],
+//!   the request limits, and the validation into a [`Problem`].
+//! - [`problem`] — the whitened [`Problem`] (plain data).
 //! - [`whiten`] — `Σ + λI = L Lᵀ`, `w = μ + L z`: cost `|z|²`.
 //! - [`phases`] — joint positions / velocities as rows in `z` per phase.
 //! - [`linear`] — limit, velocity, equality and opt-in weight-bound rows.

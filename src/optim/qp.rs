@@ -269,56 +269,71 @@ impl Qp {
         settings: &QpSettings,
     ) -> std::result::Result<QpSolution, QpFailure> {
         debug_assert!(self.equalities.is_empty());
-        let n_z = self.dim();
-        let soft: Vec<usize> = (0..self.inequalities.len())
-            .filter(|&i| self.inequalities[i].penalty.is_some())
-            .collect();
-        let n_s = soft.len() + self.cones.len();
-        let n = n_z + n_s;
-        // Slack index of each soft inequality and each cone.
-        let mut slack_of = vec![None; self.inequalities.len()];
-        for (k, &i) in soft.iter().enumerate() {
-            slack_of[i] = Some(n_z + k);
+        let layout = SlackLayout::of(self);
+        let q = self.linear_cost(&layout);
+        let (a, b, cones) = self.constraints(&layout);
+        let p = cost_matrix(layout.n_z, layout.n);
+        let mut solver = DefaultSolver::new(&p, &q, &a, &b, &cones, clarabel_settings(settings))
+            .map_err(|e| QpFailure::Numerical(format!("{e:?}")))?;
+        solver.solve();
+        match solver.solution.status {
+            SolverStatus::Solved | SolverStatus::AlmostSolved => {}
+            SolverStatus::PrimalInfeasible | SolverStatus::AlmostPrimalInfeasible => {
+                return Err(QpFailure::Infeasible)
+            }
+            SolverStatus::MaxTime => return Err(QpFailure::OutOfTime),
+            other => return Err(QpFailure::Numerical(format!("{other:?}"))),
         }
-        let cone_slack = |k: usize| n_z + soft.len() + k;
+        Ok(self.read_solution(&layout, &q, b.len(), &solver))
+    }
 
-        let mut q = vec![0.0; n];
+    /// `q` of Clarabel's `½xᵀPx + qᵀx`: `-2c` on `z`, the penalties on the
+    /// slacks.
+    fn linear_cost(&self, layout: &SlackLayout) -> Vec<f64> {
+        let mut q = vec![0.0; layout.n];
         for (qc, cc) in q.iter_mut().zip(self.center.iter()) {
             *qc = -2.0 * cc;
         }
         for (i, ineq) in self.inequalities.iter().enumerate() {
-            if let (Some(s), Some(rho)) = (slack_of[i], ineq.penalty) {
+            if let (Some(s), Some(rho)) = (layout.slack_of[i], ineq.penalty) {
                 q[s] = rho;
             }
         }
         for (k, cone) in self.cones.iter().enumerate() {
-            q[cone_slack(k)] = cone.penalty;
+            q[layout.cone_slack(k)] = cone.penalty;
         }
+        q
+    }
 
+    /// `A`, `b` and the cones of `b - A x ∈ K`: the inequalities and slack
+    /// signs (non-negative cone), each goal cone, the trust ball.
+    fn constraints(
+        &self,
+        layout: &SlackLayout,
+    ) -> (CscMatrix<f64>, Vec<f64>, Vec<SupportedConeT<f64>>) {
+        let (n_z, n) = (layout.n_z, layout.n);
         let mut cols = Columns {
             cols: vec![Vec::new(); n],
             b: Vec::new(),
         };
         let mut cones = Vec::new();
-        let mut n_nonneg = 0;
         for (i, ineq) in self.inequalities.iter().enumerate() {
-            match slack_of[i] {
+            match layout.slack_of[i] {
                 Some(s) => cols.row(&ineq.a, &[(s, -1.0)], ineq.b),
                 None => cols.row(&ineq.a, &[], ineq.b),
             }
-            n_nonneg += 1;
         }
         let empty = DVector::zeros(n_z);
         for s in n_z..n {
             cols.row(&empty, &[(s, -1.0)], 0.0);
-            n_nonneg += 1;
         }
+        let n_nonneg = self.inequalities.len() + (n - n_z);
         if n_nonneg > 0 {
             cones.push(SupportedConeT::NonnegativeConeT(n_nonneg));
         }
         for (k, cone) in self.cones.iter().enumerate() {
             // b - A x = (radius + s, offset + M z).
-            cols.row(&empty, &[(cone_slack(k), -1.0)], cone.radius);
+            cols.row(&empty, &[(layout.cone_slack(k), -1.0)], cone.radius);
             for r in 0..cone.offset.len() {
                 let row = -cone.matrix.row(r).transpose();
                 cols.row(&row, &[], cone.offset[r]);
@@ -338,41 +353,32 @@ impl Qp {
         }
         let b = cols.b.clone();
         let m = b.len();
-        let a = cols.into_csc(m);
-        let p = cost_matrix(n_z, n);
-        let qp_settings = DefaultSettings {
-            verbose: false,
-            tol_gap_abs: settings.tolerance,
-            tol_gap_rel: settings.tolerance,
-            tol_feas: settings.tolerance,
-            max_iter: settings.max_iterations,
-            time_limit: settings.time_limit.unwrap_or(f64::INFINITY),
-            ..DefaultSettings::default()
-        };
-        let mut solver = DefaultSolver::new(&p, &q, &a, &b, &cones, qp_settings)
-            .map_err(|e| QpFailure::Numerical(format!("{e:?}")))?;
-        solver.solve();
+        (cols.into_csc(m), b, cones)
+    }
+
+    /// The [`QpSolution`] of a solved Clarabel problem with `m` rows.
+    fn read_solution(
+        &self,
+        layout: &SlackLayout,
+        q: &[f64],
+        m: usize,
+        solver: &DefaultSolver<f64>,
+    ) -> QpSolution {
         let sol = &solver.solution;
-        match sol.status {
-            SolverStatus::Solved | SolverStatus::AlmostSolved => {}
-            SolverStatus::PrimalInfeasible | SolverStatus::AlmostPrimalInfeasible => {
-                return Err(QpFailure::Infeasible)
-            }
-            SolverStatus::MaxTime => return Err(QpFailure::OutOfTime),
-            other => return Err(QpFailure::Numerical(format!("{other:?}"))),
-        }
+        let (n_z, n) = (layout.n_z, layout.n);
         let x = &sol.x;
         let z = DVector::from_column_slice(&x[..n_z]);
-        let inequality_slacks = slack_of
+        let inequality_slacks = layout
+            .slack_of
             .iter()
             .map(|s| s.map_or(0.0, |s| x[s].max(0.0)))
             .collect();
         let cone_slacks = (0..self.cones.len())
-            .map(|k| x[cone_slack(k)].max(0.0))
+            .map(|k| x[layout.cone_slack(k)].max(0.0))
             .collect();
         let objective =
             (&z - &self.center).norm_squared() + (n_z..n).map(|i| q[i] * x[i]).sum::<f64>();
-        Ok(QpSolution {
+        QpSolution {
             z,
             inequality_slacks,
             cone_slacks,
@@ -391,7 +397,55 @@ impl Qp {
                 dual_residual: solver.info.res_dual,
                 gap: solver.info.gap_rel,
             }),
-        })
+        }
+    }
+}
+
+/// Where the slack variables sit in Clarabel's `x = [z, s]`: one per soft
+/// inequality, then one per cone.
+struct SlackLayout {
+    n_z: usize,
+    n: usize,
+    /// Slack index of each inequality (`None` for a hard row).
+    slack_of: Vec<Option<usize>>,
+    n_soft: usize,
+}
+
+impl SlackLayout {
+    fn of(qp: &Qp) -> SlackLayout {
+        let n_z = qp.dim();
+        let mut slack_of = vec![None; qp.inequalities.len()];
+        let mut n_soft = 0;
+        for (i, ineq) in qp.inequalities.iter().enumerate() {
+            if ineq.penalty.is_some() {
+                slack_of[i] = Some(n_z + n_soft);
+                n_soft += 1;
+            }
+        }
+        SlackLayout {
+            n_z,
+            n: n_z + n_soft + qp.cones.len(),
+            slack_of,
+            n_soft,
+        }
+    }
+
+    /// Slack index of cone `k`.
+    fn cone_slack(&self, k: usize) -> usize {
+        self.n_z + self.n_soft + k
+    }
+}
+
+/// Clarabel's settings for `settings`.
+fn clarabel_settings(settings: &QpSettings) -> DefaultSettings<f64> {
+    DefaultSettings {
+        verbose: false,
+        tol_gap_abs: settings.tolerance,
+        tol_gap_rel: settings.tolerance,
+        tol_feas: settings.tolerance,
+        max_iter: settings.max_iterations,
+        time_limit: settings.time_limit.unwrap_or(f64::INFINITY),
+        ..DefaultSettings::default()
     }
 }
 

@@ -1,4 +1,7 @@
-//! The optimise request (DESIGN.md's JSON contract) and its solver knobs.
+//! The optimise request (DESIGN.md's JSON contract), its solver knobs and
+//! limits, and (`validate`) its validation into a [`Problem`](super::Problem).
+
+mod validate;
 
 use crate::promp::annotation::JointAnnotation;
 use crate::promp::PrompConfig;
@@ -11,6 +14,8 @@ pub const MAX_OBSTACLES: usize = 1000;
 pub const MAX_EXTRA_SAMPLES: usize = 100;
 /// Largest accepted `promp.n_samples`.
 pub const MAX_PHASE_SAMPLES: usize = 2000;
+/// Default distance beyond `clearance_m` within which pairs are linearised.
+pub const DEFAULT_ACTIVATION_MARGIN_M: f64 = 0.01;
 /// Largest accepted `options.restarts`.
 pub const MAX_RESTARTS: usize = 32;
 /// Largest accepted `duration_s`.

@@ -1,0 +1,273 @@
+//! Validation of an [`OptimizeRequest`] into a whitened [`Problem`]:
+//! every field checked against the robot (errors name the JSON field), the
+//! prior repaired when it is not positive semi-definite (with a warning),
+//! the whitening, the phase rows and the limit set built.
+
+use super::DEFAULT_ACTIVATION_MARGIN_M;
+use super::{OptimizeRequest, PriorSpec, SolverOptions};
+use super::{MAX_DURATION_S, MAX_EXTRA_SAMPLES, MAX_OBSTACLES, MAX_PHASE_SAMPLES, MAX_RESTARTS};
+use crate::optim::linear::LinearSet;
+use crate::optim::phases::PhaseRows;
+use crate::optim::problem::Problem;
+use crate::optim::whiten::Whitening;
+use crate::promp::annotation::{prior_from_joints, REPAIR_FLOOR_RELATIVE};
+use crate::promp::{repair_covariance, Basis, WeightDistribution};
+use crate::robot::Robot;
+use crate::scene::Scene;
+use crate::{error::ensure_finite, Error, Result};
+use nalgebra::{DMatrix, DVector};
+
+impl OptimizeRequest {
+    /// Check every field against `robot` and build the whitened problem.
+    /// Errors name the JSON field (`prior.cov[3][4]`, `start[2]`,
+    /// `obstacles[1].radius`, `duration_s`, ...). An indefinite prior
+    /// covariance is repaired and reported as a warning.
+    pub fn validate(&self, robot: &Robot) -> Result<Problem> {
+        let mut warnings = Vec::new();
+        self.check_fields(robot)?;
+        let scene = Scene::new(self.obstacles.clone())?;
+        let activation_m = validate_options(&self.options, self.clearance_m, robot)?;
+        let linear = joint_bounds(robot, self.joint_limit_margin_rad, self)?;
+        let prior =
+            prior_distribution(&self.prior, robot.dof(), self.promp.n_basis, &mut warnings)?;
+        let lambda = match self.options.lambda {
+            Some(l) => l,
+            None => Whitening::default_lambda(&prior),
+        };
+        let whitening = Whitening::new(&prior, lambda)?;
+        let basis = Basis::new(&self.promp)?;
+        let grid = PhaseRows::new(
+            &basis,
+            &whitening,
+            robot.dof(),
+            self.duration_s,
+            basis.phases(),
+        );
+        let ends = PhaseRows::new(
+            &basis,
+            &whitening,
+            robot.dof(),
+            self.duration_s,
+            &[0.0, 1.0],
+        );
+        let dense = basis.resampled(self.promp.n_samples * self.options.verify_factor)?;
+        Ok(Problem {
+            robot: robot.clone(),
+            scene,
+            dense_phases: dense.phases().to_vec(),
+            dense_psi: dense.matrix().clone(),
+            dense_dpsi: dense.derivative() / self.duration_s,
+            basis,
+            prior,
+            whitening,
+            grid,
+            ends,
+            linear,
+            clearance_m: self.clearance_m,
+            activation_m,
+            goal: self.goal.clone(),
+            options: self.options.clone(),
+            duration: self.duration_s,
+            n_extra_samples: self.samples,
+            warnings,
+        })
+    }
+
+    /// The scalar fields, the start, the goal and the scene size: each
+    /// within its range, errors naming the field.
+    fn check_fields(&self, robot: &Robot) -> Result<()> {
+        self.promp.validate().map_err(|e| e.within("promp"))?;
+        if self.promp.n_samples > MAX_PHASE_SAMPLES {
+            return Err(Error::invalid(
+                "promp.n_samples",
+                format!(
+                    "must be at most {MAX_PHASE_SAMPLES}, got {}",
+                    self.promp.n_samples
+                ),
+            ));
+        }
+        check_range("duration_s", self.duration_s, 1e-3, MAX_DURATION_S)?;
+        check_range("clearance_m", self.clearance_m, 0.0, 1.0)?;
+        check_range(
+            "joint_limit_margin_rad",
+            self.joint_limit_margin_rad,
+            0.0,
+            1.0,
+        )?;
+        if self.samples > MAX_EXTRA_SAMPLES {
+            return Err(Error::invalid(
+                "samples",
+                format!("must be at most {MAX_EXTRA_SAMPLES}, got {}", self.samples),
+            ));
+        }
+        if let Some(start) = &self.start {
+            robot.validate_configuration("start", start)?;
+        }
+        if let Some(goal) = &self.goal {
+            ensure_finite("goal.position", &goal.position)?;
+            check_range("goal.tolerance_m", goal.tolerance_m, 1e-6, 1.0)?;
+        }
+        if self.obstacles.len() > MAX_OBSTACLES {
+            return Err(Error::invalid(
+                "obstacles",
+                format!(
+                    "at most {MAX_OBSTACLES} obstacles, got {}",
+                    self.obstacles.len()
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// `value` must be finite and in `[lo, hi]`.
+fn check_range(field: &str, value: f64, lo: f64, hi: f64) -> Result<()> {
+    if value.is_finite() && value >= lo && value <= hi {
+        Ok(())
+    } else {
+        Err(Error::invalid(
+            field,
+            format!("must be a finite number in [{lo}, {hi}], got {value}"),
+        ))
+    }
+}
+
+/// Check the solver knobs; returns the activation distance.
+fn validate_options(o: &SolverOptions, clearance: f64, robot: &Robot) -> Result<f64> {
+    if let Some(l) = o.lambda {
+        check_range("options.lambda", l, 1e-15, 1e6)?;
+    }
+    if !(1..=1000).contains(&o.max_iterations) {
+        return Err(Error::invalid(
+            "options.max_iterations",
+            format!("must be in 1..=1000, got {}", o.max_iterations),
+        ));
+    }
+    if o.restarts > MAX_RESTARTS {
+        return Err(Error::invalid(
+            "options.restarts",
+            format!("must be in 0..={MAX_RESTARTS}, got {}", o.restarts),
+        ));
+    }
+    if !(4..=32).contains(&o.verify_factor) {
+        return Err(Error::invalid(
+            "options.verify_factor",
+            format!("must be in 4..=32, got {}", o.verify_factor),
+        ));
+    }
+    check_range("options.trust_region", o.trust_region, 1e-6, 1e3)?;
+    check_range("options.penalty", o.penalty, 1e-3, 1e9)?;
+    check_range("options.qp_tolerance", o.qp_tolerance, 1e-12, 1e-3)?;
+    if let Some(q) = &o.final_configuration {
+        robot.validate_configuration("options.final_configuration", q)?;
+    }
+    let activation = o
+        .activation_distance_m
+        .unwrap_or(clearance + DEFAULT_ACTIVATION_MARGIN_M);
+    check_range("options.activation_distance_m", activation, clearance, 10.0)?;
+    Ok(activation)
+}
+
+/// Joint limits shrunk by the margin, plus the equalities.
+fn joint_bounds(robot: &Robot, margin: f64, req: &OptimizeRequest) -> Result<LinearSet> {
+    let limits = robot.limits();
+    for (j, l) in limits.iter().enumerate() {
+        if l.lower + margin >= l.upper - margin {
+            return Err(Error::invalid(
+                "joint_limit_margin_rad",
+                format!(
+                    "a margin of {margin} rad leaves no range for joint {} ({}..{})",
+                    j + 1,
+                    l.lower,
+                    l.upper
+                ),
+            ));
+        }
+    }
+    Ok(LinearSet {
+        lower: limits.iter().map(|l| l.lower + margin).collect(),
+        upper: limits.iter().map(|l| l.upper - margin).collect(),
+        velocity: limits.iter().map(|l| l.velocity).collect(),
+        start: req.start.clone(),
+        final_configuration: req.options.final_configuration.clone(),
+        bound_weights: req.options.bound_weights,
+    })
+}
+
+/// The prior as a (repaired) weight distribution over `dof x n_basis` weights.
+fn prior_distribution(
+    spec: &PriorSpec,
+    dof: usize,
+    n_basis: usize,
+    warnings: &mut Vec<String>,
+) -> Result<WeightDistribution> {
+    match spec {
+        PriorSpec::Full { mean, cov } => {
+            full_prior(mean, cov, dof, n_basis, warnings).map_err(|e| e.within("prior"))
+        }
+        PriorSpec::Annotation { annotation } => {
+            if annotation.len() != dof {
+                return Err(Error::invalid(
+                    "prior.annotation",
+                    format!("expected {dof} joints, got {}", annotation.len()),
+                ));
+            }
+            let prior =
+                prior_from_joints(annotation, n_basis).map_err(|e| e.within("prior.annotation"))?;
+            warnings.extend(prior.warnings);
+            Ok(prior.distribution)
+        }
+    }
+}
+
+fn full_prior(
+    mean: &[f64],
+    cov: &[Vec<f64>],
+    dof: usize,
+    n_basis: usize,
+    warnings: &mut Vec<String>,
+) -> Result<WeightDistribution> {
+    let n = dof * n_basis;
+    if mean.len() != n {
+        return Err(Error::invalid(
+            "mean",
+            format!(
+                "expected {n} numbers ({dof} joints x {n_basis} basis functions), got {}",
+                mean.len()
+            ),
+        ));
+    }
+    ensure_finite("mean", mean)?;
+    if cov.len() != n {
+        return Err(Error::invalid(
+            "cov",
+            format!("expected {n} rows, got {}", cov.len()),
+        ));
+    }
+    for (r, row) in cov.iter().enumerate() {
+        if row.len() != n {
+            return Err(Error::invalid(
+                format!("cov[{r}]"),
+                format!(
+                    "expected {n} numbers (the covariance must be square), got {}",
+                    row.len()
+                ),
+            ));
+        }
+        ensure_finite(&format!("cov[{r}]"), row)?;
+    }
+    let matrix = DMatrix::from_fn(n, n, |r, c| cov[r][c]);
+    let dist = WeightDistribution::new(DVector::from_column_slice(mean), matrix, dof, n_basis)?;
+    let scale = dist.cov.symmetric_eigenvalues().amax();
+    let (repaired, min_eig, changed) = repair_covariance(&dist.cov, REPAIR_FLOOR_RELATIVE * scale);
+    if changed {
+        warnings.push(format!(
+            "prior covariance is not positive semi-definite (min eigenvalue {min_eig:.3e}); eigenvalues clipped to {:.3e}",
+            REPAIR_FLOOR_RELATIVE * scale
+        ));
+    }
+    Ok(WeightDistribution {
+        cov: repaired,
+        ..dist
+    })
+}
