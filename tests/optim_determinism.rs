@@ -17,9 +17,9 @@ fn answer_with_threads(req: &OptimizeRequest, robot: &Robot, threads: usize) -> 
 
 #[test]
 fn parallel_restarts_give_the_same_bytes_on_one_or_two_threads() {
-    // Typical problem 315 needs the restarts (see optim_requests).
+    // Typical problem 400 needs the restarts (see optim_requests).
     let robot = Robot::panda().unwrap();
-    let req = typical_request(&robot, 315, &ExampleSettings::default()).unwrap();
+    let req = typical_request(&robot, 400, &ExampleSettings::default()).unwrap();
     let (status, reference) = answer_with_threads(&req, &robot, 1);
     assert_eq!(status, Status::Optimal);
     assert!(reference.contains("restart"), "the restarts must have run");

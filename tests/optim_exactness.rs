@@ -2,17 +2,20 @@
 //! problem is one convex QP (limits, velocities, start equality), and the
 //! optimiser's answer must be its optimum, checked against independent
 //! computations on the shipped real prior (`models/priors/example`, and the
-//! 25 published annotations when `../shared` is present):
+//! 25 published annotations when `../shared` is present) and, for binding
+//! limits, the real-like priors of the typical problems too:
 //!
 //! - start only, no limit binding: Gaussian conditioning on the start
 //!   (closed form, 1e-8);
 //! - a 0.25 rad joint-limit margin that binds: one Clarabel solve of the
 //!   whole QP built here from the basis, the whitening and the limits
-//!   (cost 1e-7 relative, trajectory 1e-6 rad).
+//!   (cost 1e-7 relative; trajectory 1e-6 rad on the optimiser's grid QP,
+//!   1e-4 rad where dense verification made it solve a larger one).
 
+use dpmp::optim::example::{typical_request, ExampleSettings};
 use dpmp::optim::qp::{Inequality, Qp, QpSettings};
 use dpmp::optim::whiten::Whitening;
-use dpmp::optim::{OptimizeRequest, Problem, SolveControl, Status};
+use dpmp::optim::{OptimizeRequest, PriorSpec, Problem, SolveControl, Status};
 use dpmp::promp::annotation::JointAnnotation;
 use dpmp::promp::{ViaPoint, WeightDistribution};
 use dpmp::robot::Robot;
@@ -24,13 +27,29 @@ fn manifest() -> PathBuf {
 }
 
 /// Every real prior at hand: the shipped example, plus the published 25.
-fn real_priors() -> Vec<Vec<JointAnnotation>> {
-    let mut out = vec![load(&manifest().join("models/priors/example"), 0)];
+fn real_priors() -> Vec<PriorSpec> {
+    let annotation = |a: Vec<JointAnnotation>| PriorSpec::Annotation { annotation: a };
+    let mut out = vec![annotation(load(
+        &manifest().join("models/priors/example"),
+        0,
+    ))];
     let shared = manifest().join("../shared/reference/dpmp-annotation");
     if shared.is_dir() {
-        out.extend((0..25).map(|k| load(&shared, k)));
+        out.extend((0..25).map(|k| annotation(load(&shared, k))));
     }
     out
+}
+
+/// The real-like priors of the typical problems (seeds 0..6), which ship
+/// with the project (`optim::example`).
+fn real_like_priors(robot: &Robot) -> Vec<PriorSpec> {
+    (0..6)
+        .map(|seed| {
+            typical_request(robot, seed, &ExampleSettings::default())
+                .unwrap()
+                .prior
+        })
+        .collect()
 }
 
 fn load(dir: &Path, k: usize) -> Vec<JointAnnotation> {
@@ -44,9 +63,9 @@ fn load(dir: &Path, k: usize) -> Vec<JointAnnotation> {
 
 /// A request with the prior, no obstacle, no goal, a start `offset` rad
 /// from the prior mean's first configuration (per joint pattern).
-fn request(annotation: &[JointAnnotation], robot: &Robot, margin: f64) -> OptimizeRequest {
+fn request(prior: &PriorSpec, robot: &Robot, margin: f64) -> OptimizeRequest {
     let json = serde_json::json!({
-        "prior": { "annotation": annotation },
+        "prior": prior,
         "obstacles": [],
         "joint_limit_margin_rad": margin,
     });
@@ -89,8 +108,8 @@ fn conditioned(p: &Problem, req: &OptimizeRequest) -> DVector<f64> {
 fn start_only_on_real_priors_is_gaussian_conditioning() {
     let robot = Robot::panda().unwrap();
     let mut checked = 0;
-    for (k, annotation) in real_priors().iter().enumerate() {
-        let req = request(annotation, &robot, 0.0);
+    for (k, prior) in real_priors().iter().enumerate() {
+        let req = request(prior, &robot, 0.0);
         let p = req.validate(&robot).unwrap();
         let post = conditioned(&p, &req);
         // The closed form applies when no limit binds at it.
@@ -146,7 +165,13 @@ fn max_position_gap(p: &Problem, a: &[f64], b: &[f64]) -> f64 {
 /// The whole QP over `z` (`w = μ + L z`): every position and velocity limit
 /// at every optimisation and verification phase, the start equalities;
 /// cost `|z|²`; solved once by Clarabel.
-fn direct_solve(p: &Problem, req: &OptimizeRequest, robot: &Robot, margin: f64) -> DVector<f64> {
+fn direct_solve(
+    p: &Problem,
+    req: &OptimizeRequest,
+    robot: &Robot,
+    margin: f64,
+    with_dense: bool,
+) -> DVector<f64> {
     let l = Whitening::new(p.prior(), Whitening::default_lambda(p.prior()))
         .unwrap()
         .factor()
@@ -163,7 +188,12 @@ fn direct_solve(p: &Problem, req: &OptimizeRequest, robot: &Robot, margin: f64) 
         (block.tr_mul(&psi), psi.dot(&mean.rows(j * nb, nb)))
     };
     let limits = robot.limits();
-    for basis in [p.basis(), &dense] {
+    let sets: Vec<&dpmp::promp::Basis> = if with_dense {
+        vec![p.basis(), &dense]
+    } else {
+        vec![p.basis()]
+    };
+    for basis in sets {
         for (i, _) in basis.phases().iter().enumerate() {
             let psi = basis.matrix().row(i).transpose();
             let dpsi = basis.derivative().row(i).transpose() / req.duration_s;
@@ -211,15 +241,30 @@ fn binding_limit_margins_match_one_clarabel_solve_of_the_whole_qp() {
     let robot = Robot::panda().unwrap();
     let margin = 0.25;
     let mut binding = 0;
-    for (k, annotation) in real_priors().iter().enumerate() {
-        let req = request(annotation, &robot, margin);
+    let mut priors = real_priors();
+    let published = 1..priors.len();
+    priors.extend(real_like_priors(&robot));
+    for (k, prior) in priors.iter().enumerate() {
+        let req = request(prior, &robot, margin);
         let p = req.validate(&robot).unwrap();
         if p.diagnose().is_some() {
             continue;
         }
         let sol = p.solve(&SolveControl::default()).unwrap();
         assert_eq!(sol.status, Status::Optimal, "prior {k}: {:?}", sol.reason);
-        let direct = direct_solve(&p, &req, &robot, margin);
+        // The optimiser's QP is the one on its optimisation grid; when that
+        // optimum breaks a limit between grid phases, dense verification
+        // adds phases and the SCP solves a larger QP, whose rows the
+        // reference then takes at every verification phase (equal in cost;
+        // the trajectories may differ within the 1e-6 verification
+        // tolerance, so only the cost is compared).
+        let grid = direct_solve(&p, &req, &robot, margin, false);
+        let exact = p.is_feasible(&p.evaluate(grid.as_slice()));
+        let direct = if exact {
+            grid
+        } else {
+            direct_solve(&p, &req, &robot, margin, true)
+        };
         let m_direct = p.mahalanobis(direct.as_slice());
         let rel = (sol.mahalanobis.powi(2) - m_direct.powi(2)).abs() / m_direct.powi(2).max(1e-12);
         assert!(
@@ -228,16 +273,22 @@ fn binding_limit_margins_match_one_clarabel_solve_of_the_whole_qp() {
             sol.mahalanobis.powi(2),
             m_direct.powi(2)
         );
+        // Same QP: 1e-6 rad. Larger QP: the SCP's answer may break rows
+        // it never added by up to the verification tolerance (1e-6), which
+        // moves the optimum along nearly parallel neighbouring rows.
+        let allowed = if exact { 1e-6 } else { 1e-4 };
         let worst = max_position_gap(&p, &sol.weights, direct.as_slice());
         assert!(
-            worst < 1e-6,
+            worst < allowed,
             "prior {k}: trajectory off the direct solve by {worst:e} rad"
         );
         // A margin that binds makes it cost more than the start alone.
         let start_only = p.mahalanobis(conditioned(&p, &req).as_slice());
-        if sol.mahalanobis > start_only + 1e-6 {
+        // Count only priors that ship with the project, so that the check
+        // holds without ../shared.
+        if sol.mahalanobis > start_only + 1e-6 && !published.contains(&k) {
             binding += 1;
         }
     }
-    assert!(binding >= 1, "the margin binds on no prior");
+    assert!(binding >= 1, "the margin binds on no shipped prior");
 }

@@ -123,6 +123,9 @@ impl<'a> Scp<'a> {
             if let Some(done) = self.finish_or_certify() {
                 return Ok(done);
             }
+            // `converged` describes the step about to be taken, not the
+            // last one (a run starting at its centre begins converged).
+            self.converged = false;
             if let Some(done) = self.out_of_budget() {
                 return Ok(done);
             }
