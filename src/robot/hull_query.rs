@@ -41,15 +41,7 @@ impl ConvexHull {
     /// `a`–`b` (hull frame).
     pub fn segment_contact(&self, a: &Vector3<f64>, b: &Vector3<f64>) -> HullContact {
         self.segment_contact_within(a, b, f64::INFINITY)
-            .unwrap_or_else(|| self.separated(a, b, 0, &self.plane_distances(a, b)))
-    }
-
-    /// `(n·a - d, n·b - d)` for every face plane.
-    fn plane_distances(&self, a: &Vector3<f64>, b: &Vector3<f64>) -> Vec<(f64, f64)> {
-        self.planes()
-            .iter()
-            .map(|(n, d)| (n.dot(a) - d, n.dot(b) - d))
-            .collect()
+            .unwrap_or_else(|| self.separated(a, b, 0))
     }
 
     /// [`ConvexHull::segment_contact`] when the distance is below `limit`;
@@ -65,10 +57,8 @@ impl ConvexHull {
         let mut best_face = 0;
         let mut best_sep = f64::NEG_INFINITY;
         let (mut t_lo, mut t_hi) = (0.0f64, 1.0f64);
-        let mut distances = Vec::with_capacity(planes.len());
         for (f, (n, d)) in planes.iter().enumerate() {
             let (da, db) = (n.dot(a) - d, n.dot(b) - d);
-            distances.push((da, db));
             let sep = da.min(db);
             if sep >= limit {
                 return None;
@@ -82,7 +72,7 @@ impl ConvexHull {
         if t_lo <= t_hi && best_sep <= 0.0 {
             return Some(self.overlap(a, b, best_face, best_sep));
         }
-        Some(self.separated(a, b, best_face, &distances))
+        Some(self.separated(a, b, best_face))
     }
 
     fn overlap(&self, a: &Vector3<f64>, b: &Vector3<f64>, face: usize, sep: f64) -> HullContact {
@@ -100,22 +90,16 @@ impl ConvexHull {
     /// face of largest separation, every face that can see the segment is
     /// tried unless a lower bound on its distance (its plane distance, then
     /// the distance to a ball around it) already reaches the best found.
-    /// `distances`: the ends' signed distances to every face plane.
-    fn separated(
-        &self,
-        a: &Vector3<f64>,
-        b: &Vector3<f64>,
-        first: usize,
-        distances: &[(f64, f64)],
-    ) -> HullContact {
+    fn separated(&self, a: &Vector3<f64>, b: &Vector3<f64>, first: usize) -> HullContact {
         let vertices = self.vertices();
         let triangle = |f: usize| self.faces()[f].map(|i| Vector3::from(vertices[i as usize]));
         let [p, q, r] = triangle(first);
         let (x, y) = segment_triangle_closest(a, b, &p, &q, &r);
         let mut best = ((y - x).norm(), x, y, first);
-        for (f, (&(da, db), (centre, radius))) in
-            distances.iter().zip(self.face_balls()).enumerate()
+        for (f, ((n, d), (centre, radius))) in
+            self.planes().iter().zip(self.face_balls()).enumerate()
         {
+            let (da, db) = (n.dot(a) - d, n.dot(b) - d);
             let plane = if da > 0.0 && db > 0.0 {
                 da.min(db)
             } else {

@@ -147,27 +147,10 @@ impl Scene {
         activation_m: f64,
     ) -> Vec<Clearance> {
         let mut out = Vec::new();
-        if self.is_empty() || !activation_m.is_finite() {
-            return out;
-        }
-        let Some(all) = self.bounds else {
-            return out;
-        };
-        for shape in place_robot(robot, frames) {
-            if ruled_out(shape.bounds.gap(&all), activation_m) {
-                continue;
-            }
-            for (k, obstacle) in self.compiled.iter().enumerate() {
-                if ruled_out(shape.bounds.gap(&obstacle.bounds), activation_m) {
-                    continue;
-                }
-                if let Some(contact) = obstacle_contact(&shape, obstacle, activation_m) {
-                    if contact.distance < activation_m {
-                        out.push(self.clearance(robot, shape.index, k, &contact));
-                    }
-                }
-            }
-        }
+        self.visit_contacts(robot, frames, activation_m, |shape, k, contact| {
+            out.push(self.clearance(robot, shape, k, &contact));
+            activation_m
+        });
         out
     }
 
@@ -182,12 +165,32 @@ impl Scene {
         frames: &Frames,
         activation_m: f64,
     ) -> Option<Clearance> {
-        if self.is_empty() || !activation_m.is_finite() {
-            return None;
-        }
-        let all = self.bounds?;
-        let mut limit = activation_m;
         let mut best = None;
+        self.visit_contacts(robot, frames, activation_m, |shape, k, contact| {
+            let distance = contact.distance;
+            best = Some((shape, k, contact));
+            distance
+        });
+        best.map(|(shape, k, contact)| self.clearance(robot, shape, k, &contact))
+    }
+
+    /// Visit, in primitive-then-obstacle order, every pair whose contact is
+    /// closer than the current limit (starting at `limit`; pairs the broad
+    /// phase rules out against it are skipped). `visit` gets (primitive,
+    /// obstacle, contact) and returns the limit for the rest.
+    fn visit_contacts(
+        &self,
+        robot: &Robot,
+        frames: &Frames,
+        mut limit: f64,
+        mut visit: impl FnMut(usize, usize, PairContact) -> f64,
+    ) {
+        if self.is_empty() || !limit.is_finite() {
+            return;
+        }
+        let Some(all) = self.bounds else {
+            return;
+        };
         for shape in place_robot(robot, frames) {
             if ruled_out(shape.bounds.gap(&all), limit) {
                 continue;
@@ -198,13 +201,11 @@ impl Scene {
                 }
                 if let Some(contact) = obstacle_contact(&shape, obstacle, limit) {
                     if contact.distance < limit {
-                        limit = contact.distance;
-                        best = Some((shape.index, k, contact));
+                        limit = visit(shape.index, k, contact);
                     }
                 }
             }
         }
-        best.map(|(shape, k, contact)| self.clearance(robot, shape, k, &contact))
     }
 
     /// The signed distance of one (robot primitive, obstacle) pair at
