@@ -2,6 +2,10 @@
 //! its gradient, on the shipped mesh model (convex hulls of Franka's
 //! collision meshes) and, in the same run, on the former capsule model
 //! (`benches/fixtures/panda_capsules.urdf`, not conservative) for the ratio.
+//! Then the hull-versus-segment query alone: the local certified walk
+//! against the full face scan on the same queries.
+//!
+//! `cargo bench --bench clearance` (`-- hull_query` for the query alone).
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use dpmp::robot::{Robot, PANDA_HOME};
@@ -58,5 +62,45 @@ fn clearance(c: &mut Criterion) {
     }
 }
 
-criterion_group!(benches, clearance);
+/// One hull query per (Panda hull, random segment near it): the local
+/// certified walk against the full scan of every face, same queries, same
+/// run. Limit 4 cm (a 2 cm clearance plus a berry radius).
+fn hull_query(c: &mut Criterion) {
+    use dpmp::robot::ShapeGeometry;
+    use nalgebra::Vector3;
+    use rand::{Rng, SeedableRng};
+    let robot = Robot::panda().expect("the shipped Panda loads");
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+    let mut queries = Vec::new();
+    for s in robot.collision_shapes() {
+        let ShapeGeometry::Convex(hull) = &s.geometry else {
+            continue;
+        };
+        let (ca, cb, r) = hull.bound();
+        let (ca, cb) = (Vector3::from(ca), Vector3::from(cb));
+        for _ in 0..200 {
+            let around = ca + (cb - ca) * rng.gen_range(0.0..1.0);
+            let a = around + Vector3::from_fn(|_, _| rng.gen_range(-(r + 0.05)..r + 0.05));
+            let b = a + Vector3::from_fn(|_, _| rng.gen_range(-0.04..0.04));
+            queries.push((hull.clone(), a, b));
+        }
+    }
+    let limit = 0.04;
+    c.bench_function("hull_query/local_certified", |b| {
+        b.iter(|| {
+            for (hull, a, bb) in &queries {
+                black_box(hull.segment_contact_within(a, bb, black_box(limit)));
+            }
+        })
+    });
+    c.bench_function("hull_query/full_scan", |b| {
+        b.iter(|| {
+            for (hull, a, bb) in &queries {
+                black_box(hull.segment_contact_scan(a, bb, black_box(limit)));
+            }
+        })
+    });
+}
+
+criterion_group!(benches, clearance, hull_query);
 criterion_main!(benches);

@@ -19,6 +19,7 @@
 //! the mesh. The distances themselves are computed in `f64`
 //! ([`super::hull_query`]), not by parry3d's GJK on the hull's point cloud.
 
+use super::hull_topology::HullTopology;
 use super::mesh::TriangleMesh;
 use nalgebra::{Point3, Vector3};
 use parry3d::shape::ConvexPolyhedron;
@@ -51,6 +52,8 @@ struct HullData {
     planes: Vec<(Vector3<f64>, f64)>,
     /// Centroid and radius of a ball around every face (pruning).
     face_balls: Vec<(Vector3<f64>, f64)>,
+    /// Face adjacency for the local query (shared by moved copies).
+    topology: Arc<HullTopology>,
 }
 
 impl PartialEq for ConvexHull {
@@ -136,9 +139,16 @@ impl ConvexHull {
             source: None,
             planes: Vec::new(),
             face_balls: Vec::new(),
+            topology: Arc::default(),
         };
         hull.planes = face_planes(&hull.vertices, &hull.faces);
         hull.face_balls = face_balls(&hull.vertices, &hull.faces);
+        let normals: Vec<Vector3<f64>> = hull.planes.iter().map(|(n, _)| *n).collect();
+        hull.topology = Arc::new(HullTopology::new(
+            hull.vertices.len(),
+            &hull.faces,
+            &normals,
+        ));
         let excess = points
             .iter()
             .map(|p| max_plane_distance(&hull.planes, p))
@@ -231,7 +241,13 @@ impl ConvexHull {
                 .iter()
                 .map(|(c, r)| ((pose * Point3::from(*c)).coords, *r))
                 .collect(),
+            topology: self.0.topology.clone(),
         }))
+    }
+
+    /// Which faces touch which (for the local query).
+    pub fn topology(&self) -> &HullTopology {
+        &self.0.topology
     }
 
     /// A ball `(centre, radius)` around every face, in face order.

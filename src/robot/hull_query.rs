@@ -2,17 +2,31 @@
 //! point when both ends coincide): the query behind every clearance between
 //! a mesh link and a ball or capsule obstacle (berries, stems).
 //!
-//! - Separated: the segment is clipped against every face plane; when
-//!   nothing is left, the distance is the smallest segment-triangle
-//!   distance over the faces that can see the segment (a face whose plane
-//!   has the whole segment behind it cannot hold the closest point),
-//!   starting from the face of largest separation and skipping faces whose
-//!   lower bound (plane distance, distance to a ball around the face)
-//!   already reaches the best distance found. Exact.
-//! - Overlapping: the separating-axis bound `max_f min_{y ∈ segment}
+//! - **Local, certified** (almost every query): start at the face facing
+//!   the segment, then the best of a few seed faces
+//!   ([`super::hull_topology`]), and climb to neighbouring faces while the
+//!   segment's separation from the face plane grows; a plane that
+//!   separates by the caller's limit ends the query. With the segment
+//!   outside, the closest triangle among the faces around the climbed face
+//!   is the answer when the separating axis through its witness points
+//!   proves it: the hull's support along that axis (every vertex) leaves a
+//!   lower bound within [`CERTIFICATE_GAP_M`] of the distance found. A
+//!   failed proof adds the faces around the offending vertex and retries.
+//! - **Full scan** (overlaps, and whatever the walk cannot certify): the
+//!   segment is clipped against every face plane; when nothing is left,
+//!   the distance is the smallest segment-triangle distance over the faces
+//!   that can see the segment (a face whose plane has the whole segment
+//!   behind it cannot hold the closest point), tried in increasing order of
+//!   a lower bound (plane distance, distance to a ball around the face)
+//!   until the bound reaches the best distance. Exact.
+//! - **Overlapping**: the separating-axis bound `max_f min_{y ∈ segment}
 //!   (n_f·y − d_f)` over the face normals, a lower bound on the signed
 //!   distance (the true signed distance is the maximum of the separation
 //!   over *all* directions), so a penetration is never understated.
+//!
+//! `tests/robot_hull_query.rs` checks the local answer against the full
+//! scan and the brute-force minimum over every triangle on the Panda's
+//! hulls.
 //!
 //! parry3d's `f32` GJK was measured on these hulls (dense point clouds of
 //! near-coplanar vertices) to err by up to 1 cm either way, which is why the
@@ -38,16 +52,50 @@ pub struct HullContact {
 
 impl ConvexHull {
     /// Signed distance and witnesses between the hull and the segment
-    /// `a`–`b` (hull frame).
+    /// `a`–`b` (hull frame); the distance is -∞ (never a clearance) when an
+    /// end is not finite.
     pub fn segment_contact(&self, a: &Vector3<f64>, b: &Vector3<f64>) -> HullContact {
         self.segment_contact_within(a, b, f64::INFINITY)
-            .unwrap_or_else(|| self.separated(a, b, 0))
+            .unwrap_or(HullContact {
+                distance: f64::INFINITY,
+                point_hull: *a,
+                point_segment: *a,
+                normal: Vector3::z(),
+            })
     }
 
-    /// [`ConvexHull::segment_contact`] when the distance is below `limit`;
-    /// `None` as soon as one face plane separates the segment by `limit` or
-    /// more (a lower bound on the distance), without the rest of the work.
+    /// [`ConvexHull::segment_contact`] when the distance is below `limit`,
+    /// `None` otherwise. The local walk answers almost every query
+    /// ([`ConvexHull::local_contact`]); what it cannot certify (overlaps,
+    /// the rare walk that stops short) goes to the full scan
+    /// ([`ConvexHull::segment_contact_scan`]).
     pub fn segment_contact_within(
+        &self,
+        a: &Vector3<f64>,
+        b: &Vector3<f64>,
+        limit: f64,
+    ) -> Option<HullContact> {
+        if !a.iter().chain(b.iter()).all(|c| c.is_finite()) {
+            return Some(HullContact {
+                distance: f64::NEG_INFINITY,
+                point_hull: *a,
+                point_segment: *a,
+                normal: Vector3::z(),
+            });
+        }
+        match self.local_contact(a, b, limit) {
+            Local::Far => None,
+            Local::Found(c) => (c.distance < limit).then_some(c),
+            Local::Unsure => self.segment_contact_scan(a, b, limit),
+        }
+    }
+
+    /// The reference query: every face plane scanned (Cyrus–Beck clipping
+    /// tells overlap from separation), then the exact distance over every
+    /// face that can see the segment. `None` when the distance is `limit` or
+    /// more: at once when one face plane separates the segment by `limit`,
+    /// and without finishing once every candidate face is ruled out.
+    pub fn segment_contact_scan(
         &self,
         a: &Vector3<f64>,
         b: &Vector3<f64>,
@@ -72,7 +120,7 @@ impl ConvexHull {
         if t_lo <= t_hi && best_sep <= 0.0 {
             return Some(self.overlap(a, b, best_face, best_sep));
         }
-        Some(self.separated(a, b, best_face))
+        self.separated(a, b, best_face, limit)
     }
 
     fn overlap(&self, a: &Vector3<f64>, b: &Vector3<f64>, face: usize, sep: f64) -> HullContact {
@@ -86,31 +134,73 @@ impl ConvexHull {
         }
     }
 
-    /// Exact distance for a segment outside the hull: starting from the
-    /// face of largest separation, every face that can see the segment is
-    /// tried unless a lower bound on its distance (its plane distance, then
-    /// the distance to a ball around it) already reaches the best found.
-    fn separated(&self, a: &Vector3<f64>, b: &Vector3<f64>, first: usize) -> HullContact {
+    /// Exact distance for a segment outside the hull, when below `limit`
+    /// (`None` otherwise), over every face, starting from face `first`.
+    fn separated(
+        &self,
+        a: &Vector3<f64>,
+        b: &Vector3<f64>,
+        first: usize,
+        limit: f64,
+    ) -> Option<HullContact> {
+        let all = (0..self.faces().len() as u32).filter(|&f| f as usize != first);
+        let (distance, x, y, face) = self.closest_triangle(a, b, first, all, limit)?;
+        Some(HullContact {
+            distance,
+            point_hull: x,
+            point_segment: y,
+            normal: (x - y)
+                .try_normalize(1e-15)
+                .unwrap_or_else(|| -self.planes()[face].0),
+        })
+    }
+
+    /// The closest triangle to a segment outside the hull among `first`
+    /// and `others`, when closer than `limit`: `(distance, point on the
+    /// hull, point on the segment, face)`. The triangle of `first` gives a
+    /// first distance; every other face that can see the segment (a face
+    /// whose plane has the whole segment behind it cannot hold the closest
+    /// point) and whose lower bound (its plane distance, then the distance
+    /// to a ball around it) is below the best so far is a candidate, and
+    /// candidates are tried in increasing order of bound until the bound
+    /// reaches the best distance.
+    fn closest_triangle(
+        &self,
+        a: &Vector3<f64>,
+        b: &Vector3<f64>,
+        first: usize,
+        others: impl Iterator<Item = u32>,
+        limit: f64,
+    ) -> Option<(f64, Vector3<f64>, Vector3<f64>, usize)> {
         let vertices = self.vertices();
         let triangle = |f: usize| self.faces()[f].map(|i| Vector3::from(vertices[i as usize]));
         let [p, q, r] = triangle(first);
         let (x, y) = segment_triangle_closest(a, b, &p, &q, &r);
         let mut best = ((y - x).norm(), x, y, first);
-        for (f, ((n, d), (centre, radius))) in
-            self.planes().iter().zip(self.face_balls()).enumerate()
-        {
+        let cutoff = best.0.min(limit);
+        let (planes, balls) = (self.planes(), self.face_balls());
+        let mut candidates = Vec::new();
+        for f in others.map(|f| f as usize) {
+            let ((n, d), (centre, radius)) = (planes[f], balls[f]);
             let (da, db) = (n.dot(a) - d, n.dot(b) - d);
             let plane = if da > 0.0 && db > 0.0 {
                 da.min(db)
             } else {
                 0.0
             };
-            if f == first || da.max(db) <= 0.0 || plane >= best.0 {
+            if da.max(db) <= 0.0 || plane >= cutoff {
                 continue;
             }
-            let (_, near) = closest_segments(centre, centre, a, b);
-            if (near - centre).norm() - radius >= best.0 {
-                continue;
+            let (_, near) = closest_segments(&centre, &centre, a, b);
+            let bound = plane.max((near - centre).norm() - radius);
+            if bound < cutoff {
+                candidates.push((bound, f));
+            }
+        }
+        candidates.sort_unstable_by(|u, v| u.0.total_cmp(&v.0).then(u.1.cmp(&v.1)));
+        for (bound, f) in candidates {
+            if bound >= best.0.min(limit) {
+                break;
             }
             let [p, q, r] = triangle(f);
             let (x, y) = segment_triangle_closest(a, b, &p, &q, &r);
@@ -119,17 +209,129 @@ impl ConvexHull {
                 best = (dist, x, y, f);
             }
         }
-        let (distance, x, y, face) = best;
-        HullContact {
-            distance,
-            point_hull: x,
-            point_segment: y,
-            normal: (x - y)
-                .try_normalize(1e-15)
-                .unwrap_or_else(|| -self.planes()[face].0),
+        (best.0 < limit).then_some(best)
+    }
+
+    /// The query by a local walk, certified: from the best of the seed
+    /// faces, climb to neighbouring faces while the segment's separation
+    /// from the face plane grows (`Far` as soon as one plane separates it
+    /// by `limit`). With a positive separation the segment is outside; the
+    /// closest triangle among the faces around the climbed face is then
+    /// exact when the separating axis through its witnesses (the hull's
+    /// support along it over every vertex) proves a lower bound within
+    /// [`CERTIFICATE_GAP_M`] of it. A failed proof adds the faces around
+    /// the vertex that broke it and tries again; `Unsure` leaves the
+    /// query to the full scan.
+    fn local_contact(&self, a: &Vector3<f64>, b: &Vector3<f64>, limit: f64) -> Local {
+        let topology = self.topology();
+        let planes = self.planes();
+        let separation = |f: usize| {
+            let (n, d) = planes[f];
+            (n.dot(a) - d).min(n.dot(b) - d)
+        };
+        // Most far pairs are ruled out by the face facing the segment.
+        let (ca, cb, _) = self.bound();
+        let towards = (a + b - Vector3::from(ca) - Vector3::from(cb)) * 0.5;
+        if separation(topology.seed_towards(&towards) as usize) >= limit {
+            return Local::Far;
         }
+        let Some((mut face, mut best)) = topology
+            .seeds
+            .iter()
+            .map(|&f| (f as usize, separation(f as usize)))
+            .max_by(|u, v| u.1.total_cmp(&v.1))
+        else {
+            return Local::Unsure;
+        };
+        for _ in 0..MAX_WALK_STEPS {
+            if best >= limit {
+                return Local::Far;
+            }
+            let Some((next, sep)) = topology
+                .face_neighbours
+                .get(face)
+                .iter()
+                .map(|&g| (g as usize, separation(g as usize)))
+                .max_by(|u, v| u.1.total_cmp(&v.1))
+                .filter(|&(_, sep)| sep > best)
+            else {
+                break;
+            };
+            (face, best) = (next, sep);
+        }
+        if best >= limit {
+            return Local::Far;
+        }
+        if best <= 0.0 {
+            return Local::Unsure;
+        }
+        let mut around: Vec<u32> = topology.face_neighbours.get(face).to_vec();
+        for _ in 0..MAX_CERTIFY_ROUNDS {
+            let Some((distance, x, y, _)) =
+                self.closest_triangle(a, b, face, around.iter().copied(), f64::INFINITY)
+            else {
+                return Local::Unsure;
+            };
+            let n = (y - x) / distance;
+            let (vertex, support) = self.support(&n);
+            let lower = n.dot(a).min(n.dot(b)) - support;
+            if lower >= limit {
+                return Local::Far;
+            }
+            if lower >= distance - CERTIFICATE_GAP_M {
+                return Local::Found(HullContact {
+                    distance,
+                    point_hull: x,
+                    point_segment: y,
+                    normal: -n,
+                });
+            }
+            for &g in topology.vertex_faces.get(vertex) {
+                if g as usize != face && !around.contains(&g) {
+                    around.push(g);
+                }
+            }
+        }
+        Local::Unsure
+    }
+
+    /// The vertex farthest along `n` and its projection.
+    fn support(&self, n: &Vector3<f64>) -> (usize, f64) {
+        self.vertices()
+            .iter()
+            .map(|v| n.x * v[0] + n.y * v[1] + n.z * v[2])
+            .enumerate()
+            .fold((0, f64::NEG_INFINITY), |best, (i, h)| {
+                if h > best.1 {
+                    (i, h)
+                } else {
+                    best
+                }
+            })
     }
 }
+
+/// What the local walk found.
+enum Local {
+    /// The distance is `limit` or more.
+    Far,
+    /// The exact contact, certified.
+    Found(HullContact),
+    /// No certificate: the full scan decides.
+    Unsure,
+}
+
+/// Face-to-face steps of the local walk before it stops where it is.
+const MAX_WALK_STEPS: usize = 64;
+
+/// Rounds of adding faces around a vertex that breaks the certificate
+/// before the local query gives up to the full scan.
+const MAX_CERTIFY_ROUNDS: usize = 4;
+
+/// How far (m) the separating-axis lower bound may sit below the distance
+/// found for the distance to count as exact (rounding on coordinates of a
+/// few decimetres is ~1e-17 m).
+const CERTIFICATE_GAP_M: f64 = 1e-12;
 
 /// Cyrus–Beck clipping of the segment parameter range by one half-space
 /// (`da`, `db`: signed plane distances of the ends, inside ≤ 0).

@@ -10,7 +10,10 @@
 //! - [`collision`]: the link collision geometry ([`LinkShape`]);
 //! - [`mesh`], [`mesh_files`] and [`hull`]: collision meshes (STL, OBJ),
 //!   where their files are found, and the convex hull that contains each
-//!   one (the conservative geometry every clearance is measured against).
+//!   one (the conservative geometry every clearance is measured against);
+//! - [`hull_query`] and [`hull_topology`]: the exact hull-versus-segment
+//!   distance (a certified local walk over the hull's faces, the full scan
+//!   as fallback and reference).
 //!
 //! The Franka Panda ([`Robot::panda`]) is the default; its collision
 //! geometry is Franka's published collision meshes (embedded in the binary
@@ -23,6 +26,7 @@ pub mod collision;
 pub mod fk;
 pub mod hull;
 pub mod hull_query;
+pub mod hull_topology;
 pub mod ik;
 pub mod jacobian;
 pub mod mesh;
