@@ -3,9 +3,9 @@
 //! a mesh link and a ball or capsule obstacle (berries, stems).
 //!
 //! - **Local, certified** (almost every query): start at the face facing
-//!   the segment, then the best of a few seed faces
-//!   ([`super::hull_topology`]), and climb to neighbouring faces while the
-//!   segment's separation from the face plane grows; a plane that
+//!   the segment ([`super::hull_topology`]) and climb to neighbouring faces
+//!   while the segment's separation from the face plane grows (again from
+//!   the best of a few seed faces when that shows no separation); a plane that
 //!   separates by the caller's limit ends the query. With the segment
 //!   outside, the closest triangle among the faces around the climbed face
 //!   is the answer when the separating axis through its witness points
@@ -229,35 +229,42 @@ impl ConvexHull {
             let (n, d) = planes[f];
             (n.dot(a) - d).min(n.dot(b) - d)
         };
-        // Most far pairs are ruled out by the face facing the segment.
+        // Climb to neighbouring faces while the separation grows (stopping
+        // once it reaches the limit).
+        let climb = |mut face: usize, mut best: f64| {
+            for _ in 0..MAX_WALK_STEPS {
+                if best >= limit {
+                    break;
+                }
+                let Some(next) = topology
+                    .face_neighbours
+                    .get(face)
+                    .iter()
+                    .map(|&g| (g as usize, separation(g as usize)))
+                    .max_by(|u, v| u.1.total_cmp(&v.1))
+                    .filter(|&(_, sep)| sep > best)
+                else {
+                    break;
+                };
+                (face, best) = next;
+            }
+            (face, best)
+        };
+        // From the face facing the segment (most far pairs end there), then,
+        // if that climb does not show the segment outside, from the best seed.
         let (ca, cb, _) = self.bound();
         let towards = (a + b - Vector3::from(ca) - Vector3::from(cb)) * 0.5;
-        if separation(topology.seed_towards(&towards) as usize) >= limit {
-            return Local::Far;
-        }
-        let Some((mut face, mut best)) = topology
-            .seeds
-            .iter()
-            .map(|&f| (f as usize, separation(f as usize)))
-            .max_by(|u, v| u.1.total_cmp(&v.1))
-        else {
-            return Local::Unsure;
-        };
-        for _ in 0..MAX_WALK_STEPS {
-            if best >= limit {
-                return Local::Far;
-            }
-            let Some((next, sep)) = topology
-                .face_neighbours
-                .get(face)
+        let start = topology.seed_towards(&towards) as usize;
+        let (mut face, mut best) = climb(start, separation(start));
+        if best <= 0.0 {
+            let seed = topology
+                .seeds
                 .iter()
-                .map(|&g| (g as usize, separation(g as usize)))
-                .max_by(|u, v| u.1.total_cmp(&v.1))
-                .filter(|&(_, sep)| sep > best)
-            else {
-                break;
-            };
-            (face, best) = (next, sep);
+                .map(|&f| (f as usize, separation(f as usize)))
+                .max_by(|u, v| u.1.total_cmp(&v.1));
+            if let Some((f, sep)) = seed.filter(|&(_, sep)| sep > best) {
+                (face, best) = climb(f, sep);
+            }
         }
         if best >= limit {
             return Local::Far;
