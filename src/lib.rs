@@ -28,6 +28,8 @@
 //!   link collision shapes.
 //! - [`scene`] — obstacles and signed-distance queries against the robot.
 //! - [`optim`] — the Mahalanobis-closest trajectory optimiser.
+//! - [`perception`] — the gripper camera model, aligned depth images, and
+//!   the 3-D target position behind a box.
 //! - [`synth`] — synthetic plant scenes, camera renderer, demonstrations.
 //! - [`net`] and [`train`] — the dPMP network in candle and its training.
 //! - [`service`] — the axum HTTP service.
@@ -46,6 +48,7 @@ pub mod cli;
 pub mod error;
 pub mod net;
 pub mod optim;
+pub mod perception;
 pub mod plot;
 pub mod promp;
 pub mod robot;

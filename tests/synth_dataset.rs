@@ -2,8 +2,9 @@
 //! worker counts, the manifest contract, statistics against the real data's
 //! band, and validation before anything is written.
 
+use dpmp::perception::locate_target;
 use dpmp::robot::Robot;
-use dpmp::synth::dataset::{load_image, load_manifest, load_record};
+use dpmp::synth::dataset::{load_depth, load_image, load_manifest, load_record};
 use dpmp::synth::generate::{generate, GenerateOptions, Generator};
 use dpmp::synth::settings::SynthSettings;
 use dpmp::synth::stats::{dataset_stats, default_basis, TargetSummary};
@@ -21,7 +22,7 @@ fn options(out: &Path, workers: usize) -> GenerateOptions {
 
 fn files(dir: &Path) -> Vec<(String, Vec<u8>)> {
     let mut out = Vec::new();
-    for sub in ["images", "targets"] {
+    for sub in ["images", "targets", "depth"] {
         let mut names: Vec<_> = std::fs::read_dir(dir.join(sub))
             .unwrap()
             .map(|e| e.unwrap().path())
@@ -49,7 +50,7 @@ fn same_seed_gives_byte_identical_datasets_for_any_worker_count() {
     generate(&g, &options(&a, 1)).unwrap();
     generate(&g, &options(&b, 2)).unwrap();
     let (fa, fb) = (files(&a), files(&b));
-    assert_eq!(fa.len(), 3 * 2 * 2 + 1);
+    assert_eq!(fa.len(), 3 * 2 * 3 + 1);
     for ((na, ba), (nb, bb)) in fa.iter().zip(&fb) {
         assert_eq!(na, nb);
         assert!(ba == bb, "{na} differs between 1 and 2 workers");
@@ -76,6 +77,18 @@ fn manifest_lists_only_existing_valid_files_and_splits_by_config() {
             .obstacles
             .iter()
             .any(|o| o.id == r.target_obstacle_id));
+        // The aligned depth image: same size, and the recorded target depth
+        // is what back-projection measures in it, within a few mm of the
+        // true berry centre.
+        let depth = load_depth(tmp.path(), e, 0.001).unwrap().unwrap();
+        assert_eq!((depth.width(), depth.height()), (640, 480));
+        let measured = r.target_depth_m.expect("measured depth");
+        let camera = g.camera();
+        let t = locate_target(&depth, &r.bbox, camera, "depth").unwrap();
+        assert_eq!(t.depth_m, measured);
+        let truth = nalgebra::Point3::from(r.target_position);
+        let error = (nalgebra::Point3::from(t.position) - truth).norm();
+        assert!(error < 0.008, "{}: {error} m", r.id);
     }
     let all: usize = ["train", "val", "test"]
         .iter()
@@ -94,6 +107,34 @@ fn manifest_lists_only_existing_valid_files_and_splits_by_config() {
         }
     }
     assert!(m.split("bogus").is_err());
+}
+
+#[test]
+fn a_colour_only_dataset_of_format_1_still_loads() {
+    let mut settings = SynthSettings::new(2, 2);
+    settings.depth.enabled = false;
+    let g = Generator::new(settings, Robot::panda().unwrap()).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    generate(&g, &options(tmp.path(), 1)).unwrap();
+    // Rewrite the manifest as version 1 wrote it: old tag, no depth fields.
+    let path = tmp.path().join("manifest.json");
+    let mut m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    m["format"] = "dpmp-dataset/1".into();
+    m["settings"].as_object_mut().unwrap().remove("depth");
+    std::fs::write(&path, serde_json::to_string(&m).unwrap()).unwrap();
+    let m = load_manifest(tmp.path()).unwrap();
+    for e in &m.targets {
+        assert!(e.depth.is_none());
+        assert!(load_depth(tmp.path(), e, 0.001).unwrap().is_none());
+        let r = load_record(tmp.path(), e).unwrap();
+        assert!(r.depth.is_none() && r.target_depth_m.is_none());
+    }
+    let mut bad = serde_json::to_value(&m).unwrap();
+    bad["format"] = "dpmp-dataset/9".into();
+    std::fs::write(&path, serde_json::to_string(&bad).unwrap()).unwrap();
+    let e = load_manifest(tmp.path()).unwrap_err();
+    assert!(e.to_string().contains("format"), "{e}");
 }
 
 #[test]

@@ -1,8 +1,10 @@
-//! The synthetic dataset on disk (`dpmp-dataset/1`):
+//! The synthetic dataset on disk (`dpmp-dataset/2`; version 1, without
+//! depth, still loads):
 //!
 //! ```text
 //! DIR/manifest.json                written last (temp file + rename)
 //! DIR/images/<target_id>.png       640x480 RGB, target berry boxed in white
+//! DIR/depth/<target_id>.png        640x480 16-bit z-depth (mm, 0 = no return), format 2
 //! DIR/targets/<target_id>.json     one TargetRecord per target
 //! ```
 //!
@@ -20,8 +22,12 @@ use crate::{Error, Result};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
-/// The format tag in every manifest.
-pub const FORMAT: &str = "dpmp-dataset/1";
+/// The format tag of the manifests this version writes: version 2 adds
+/// aligned depth images (`depth/<id>.png`) and each target's measured depth.
+pub const FORMAT: &str = "dpmp-dataset/2";
+
+/// Format tags this version reads (version 1: colour only).
+pub const READABLE_FORMATS: [&str; 2] = ["dpmp-dataset/1", FORMAT];
 
 /// `c{config:04}_b{berry:02}`.
 pub fn target_id(config: usize, berry: usize) -> String {
@@ -52,6 +58,10 @@ pub struct TargetEntry {
     pub image: String,
     /// Record path relative to the dataset directory.
     pub record: String,
+    /// Aligned depth image (16-bit PNG) relative to the dataset directory,
+    /// when the dataset has depth.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub depth: Option<String>,
 }
 
 impl TargetEntry {
@@ -61,6 +71,7 @@ impl TargetEntry {
         TargetEntry {
             image: format!("images/{id}.png"),
             record: format!("targets/{id}.json"),
+            depth: None,
             id,
             config,
             berry,
@@ -117,10 +128,13 @@ impl Manifest {
     }
 
     fn validate(&self) -> Result<()> {
-        if self.format != FORMAT {
+        if !READABLE_FORMATS.contains(&self.format.as_str()) {
             return Err(Error::invalid(
                 "format",
-                format!("expected {FORMAT:?}, got {:?}", self.format),
+                format!(
+                    "expected one of {READABLE_FORMATS:?}, got {:?}",
+                    self.format
+                ),
             ));
         }
         for (i, t) in self.targets.iter().enumerate() {
@@ -179,6 +193,13 @@ pub struct TargetRecord {
     pub berry: usize,
     /// Image path relative to the dataset directory.
     pub image: String,
+    /// Aligned depth image path relative to the dataset directory (format 2).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub depth: Option<String>,
+    /// The target's depth measured in that image: the camera-frame z of
+    /// the berry centre by [`crate::perception::locate_target`] (m).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub target_depth_m: Option<f64>,
     /// Target box `[x1, y1, x2, y2]` (px).
     #[serde(rename = "box")]
     pub bbox: [f64; 4],
@@ -224,6 +245,14 @@ impl TargetRecord {
         }
         ensure_finite("center", &self.center)?;
         ensure_finite("target_position", &self.target_position)?;
+        if let Some(d) = self.target_depth_m {
+            if !(d.is_finite() && d > 0.0) {
+                return Err(Error::invalid(
+                    "target_depth_m",
+                    format!("must be a finite depth > 0, got {d}"),
+                ));
+            }
+        }
         ensure_finite("start", &self.start)?;
         ensure_finite("final_tcp.position", &self.final_tcp.position)?;
         ensure_finite("final_tcp.quaternion", &self.final_tcp.quaternion)?;
@@ -333,6 +362,23 @@ pub fn load_image(dir: &Path, entry: &TargetEntry) -> Result<image::RgbImage> {
     let img =
         image::open(&path).map_err(|e| Error::file(&path, format!("cannot read image: {e}")))?;
     Ok(img.to_rgb8())
+}
+
+/// Read the aligned depth image of one entry (`None` when the dataset has
+/// no depth), in the dataset's depth scale.
+pub fn load_depth(
+    dir: &Path,
+    entry: &TargetEntry,
+    scale_m: f64,
+) -> Result<Option<crate::perception::DepthImage>> {
+    let Some(rel) = &entry.depth else {
+        return Ok(None);
+    };
+    let path = dir.join(relative_path(rel).map_err(|e| e.within("depth"))?);
+    let bytes = std::fs::read(&path).map_err(|e| Error::file(&path, e.to_string()))?;
+    crate::perception::DepthImage::decode_png(&bytes, scale_m, "depth")
+        .map(Some)
+        .map_err(|e| Error::file(&path, e.to_string()))
 }
 
 /// Write `bytes` to `path` atomically (temp file in the same directory, then rename).

@@ -11,14 +11,16 @@
 //! [`generate`] runs the configurations on a rayon pool, writes images and
 //! records atomically as they finish and the manifest last.
 
+use crate::perception::{locate_target, DepthImage};
 use crate::promp::{Basis, PrompConfig};
 use crate::robot::{IkOptions, IkTarget, Robot};
 use crate::scene::Scene;
-use crate::synth::camera::{Camera, Intrinsics};
+use crate::synth::camera::Camera;
 use crate::synth::dataset::{self, DistributionJson, Manifest, Splits, TargetEntry, TargetRecord};
 use crate::synth::demos::{approach_axis, DemoContext, TargetDemos};
 use crate::synth::obstacles::plant_scene_file;
 use crate::synth::plant::{sample_plant, Placement, Plant};
+use crate::synth::render::depth::measured_depth;
 use crate::synth::render::{box_center, render_plant, target_box, target_image};
 use crate::synth::settings::RegionAnchor;
 use crate::synth::settings::SynthSettings;
@@ -45,8 +47,22 @@ pub struct ConfigOutput {
     pub records: Vec<TargetRecord>,
     /// One image per berry.
     pub images: Vec<RgbImage>,
+    /// One aligned depth image per berry (when depth is enabled).
+    pub depths: Vec<Option<DepthImage>>,
     /// Draws of the configuration that were needed (1 = first draw accepted).
     pub attempts: usize,
+}
+
+/// Per berry of a configuration: records, colour images, depth images.
+type RenderedTargets = (Vec<TargetRecord>, Vec<RgbImage>, Vec<Option<DepthImage>>);
+
+/// The RNG of the depth noise of configuration `config` under `seed`: a
+/// stream of its own, so the colour images do not depend on the depth
+/// settings.
+pub fn depth_rng(seed: u64, config: usize) -> ChaCha8Rng {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0xD3E7_5EED_0000_0000);
+    rng.set_stream(config as u64);
+    rng
 }
 
 /// The RNG of configuration `config` under `seed` (its own ChaCha8 stream).
@@ -76,7 +92,7 @@ impl Generator {
         let home_pose = robot.tcp_pose(&robot.home());
         let tcp = Point3::from(home_pose.translation.vector);
         let axis = home_pose.rotation * Vector3::z();
-        let camera = Camera::on_gripper(&settings.camera, tcp, axis)?;
+        let camera = Camera::on_gripper(&settings.camera.model(), tcp, axis)?;
         let g = Generator {
             settings,
             robot,
@@ -194,11 +210,13 @@ impl Generator {
             )?;
             match self.demos_for(&plant, &mut rng) {
                 Ok((scene_file, demos)) => {
-                    let (records, images) =
-                        self.finish(config, &plant, scene_file, demos, &mut rng)?;
+                    let rngs = (&mut rng, &mut depth_rng(seed, config));
+                    let (records, images, depths) =
+                        self.finish(config, &plant, scene_file, demos, rngs)?;
                     return Ok(ConfigOutput {
                         records,
                         images,
+                        depths,
                         attempts: attempt,
                     });
                 }
@@ -233,26 +251,54 @@ impl Generator {
         Ok((scene_file, demos))
     }
 
+    /// Render the plant once, then per berry: its box, the colour image
+    /// with sensor noise and the box painted, the depth image with its
+    /// error model and the target's measured depth, and the record.
     fn finish(
         &self,
         config: usize,
         plant: &Plant,
         scene: crate::scene::SceneFile,
         demos: Vec<TargetDemos>,
-        rng: &mut ChaCha8Rng,
-    ) -> Result<(Vec<TargetRecord>, Vec<RgbImage>)> {
-        let base = render_plant(plant, &self.camera, &self.settings.render, rng);
-        let mut records = Vec::with_capacity(demos.len());
-        let mut images = Vec::with_capacity(demos.len());
+        (rng, depth_rng): (&mut ChaCha8Rng, &mut ChaCha8Rng),
+    ) -> Result<RenderedTargets> {
+        let (base, exact_depth) = render_plant(plant, &self.camera, &self.settings.render, rng);
+        let mut out = (Vec::new(), Vec::new(), Vec::new());
         for (i, (berry, td)) in plant.berries.iter().zip(demos).enumerate() {
             let bbox = target_box(&self.camera, berry).ok_or_else(|| {
                 Error::Numerical(format!("berry {} is behind the camera", berry.id))
             })?;
             let noise = self.settings.render.noise_std.sample(rng);
-            images.push(target_image(&base, &bbox, noise, rng));
-            records.push(self.record(config, i, berry, bbox, scene.clone(), td));
+            out.1.push(target_image(&base, &bbox, noise, rng));
+            let mut record = self.record(config, i, berry, bbox, scene.clone(), td);
+            let depth = self.measure_depth(&exact_depth, &bbox, depth_rng, &mut record)?;
+            out.2.push(depth);
+            out.0.push(record);
         }
-        Ok((records, images))
+        Ok(out)
+    }
+
+    /// The depth image of one target and its measured depth (written into
+    /// `record`); `None` when depth is disabled. A berry whose box holds
+    /// too little valid depth keeps its image but no measured depth.
+    fn measure_depth(
+        &self,
+        exact: &[f64],
+        bbox: &[f64; 4],
+        rng: &mut ChaCha8Rng,
+        record: &mut TargetRecord,
+    ) -> Result<Option<DepthImage>> {
+        let settings = &self.settings.depth;
+        if !settings.enabled {
+            return Ok(None);
+        }
+        let width = self.camera.intrinsics.width as usize;
+        let depth = measured_depth(exact, width, settings, rng)?;
+        record.depth = Some(format!("depth/{}.png", record.id));
+        record.target_depth_m = locate_target(&depth, bbox, &self.camera, "depth")
+            .ok()
+            .map(|t| t.depth_m);
+        Ok(Some(depth))
     }
 
     fn record(
@@ -271,6 +317,8 @@ impl Generator {
             config,
             berry: index,
             image: entry.image,
+            depth: None,
+            target_depth_m: None,
             bbox,
             center: box_center(&bbox),
             scene,
@@ -303,6 +351,12 @@ impl Generator {
         let s = &self.settings;
         let targets: Vec<TargetEntry> = (0..s.configs)
             .flat_map(|c| (0..s.berries_per_config).map(move |b| TargetEntry::new(c, b)))
+            .map(|mut t| {
+                if s.depth.enabled {
+                    t.depth = Some(format!("depth/{}.png", t.id));
+                }
+                t
+            })
             .collect();
         Manifest {
             format: dataset::FORMAT.to_string(),
@@ -310,7 +364,7 @@ impl Generator {
             seed,
             settings: s.clone(),
             promp: self.basis.config().clone(),
-            camera: Intrinsics::from_settings(&s.camera),
+            camera: s.camera.model().intrinsics,
             splits: split_by_config(s, seed),
             targets,
         }
@@ -408,7 +462,7 @@ pub fn generate(generator: &Generator, options: &GenerateOptions) -> Result<Gene
         std::fs::remove_file(&manifest_path)
             .map_err(|e| Error::file(&manifest_path, e.to_string()))?;
     }
-    for sub in ["images", "targets"] {
+    for sub in ["images", "targets", "depth"] {
         let d = out.join(sub);
         std::fs::create_dir_all(&d)
             .map_err(|e| Error::file(&d, format!("cannot create directory: {e}")))?;
@@ -445,8 +499,16 @@ pub fn generate(generator: &Generator, options: &GenerateOptions) -> Result<Gene
 }
 
 fn write_config(out: &Path, output: &ConfigOutput) -> Result<()> {
-    for (record, image) in output.records.iter().zip(&output.images) {
+    for ((record, image), depth) in output
+        .records
+        .iter()
+        .zip(&output.images)
+        .zip(&output.depths)
+    {
         dataset::write_png_atomic(&out.join(&record.image), image)?;
+        if let (Some(path), Some(depth)) = (&record.depth, depth) {
+            dataset::write_atomic(&out.join(path), &depth.encode_png()?)?;
+        }
         dataset::write_json_atomic(&out.join(format!("targets/{}.json", record.id)), record)?;
     }
     Ok(())

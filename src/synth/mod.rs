@@ -5,10 +5,10 @@
 //! - [`settings`] — every generator setting, validated.
 //! - [`plant`] — the plant sampler (berries, stems, leaves, tray).
 //! - [`obstacles`] — a plant as request-schema obstacles.
-//! - [`camera`] — the pinhole camera on the gripper.
+//! - [`camera`] — the pinhole camera on the gripper (from [`crate::perception`]).
 //! - [`render`] — rasteriser, shading, textures, noise, the target box.
 //! - [`demos`] — IK-based, minimum-jerk, collision-checked demonstrations.
-//! - [`dataset`] — the on-disk format (`dpmp-dataset/1`) and its loaders.
+//! - [`dataset`] — the on-disk format (`dpmp-dataset/2`, with depth; version 1 still loads) and its loaders.
 //! - [`generate`] — the deterministic parallel driver.
 //! - [`stats`] — dataset statistics beside the real annotation data.
 //!
@@ -21,7 +21,8 @@
 //! # Ok::<(), dpmp::Error>(())
 //! ```
 
-pub mod camera;
+/// The camera lives in [`crate::perception`]; this path stays for callers.
+pub use crate::perception::camera;
 pub mod dataset;
 pub mod demos;
 pub mod generate;

@@ -3,6 +3,7 @@
 //! a `validate` that names the offending field.
 
 use crate::error::ensure_finite;
+use crate::perception::camera::{CameraModel, Intrinsics};
 use crate::{Error, Result};
 use serde::{Deserialize, Serialize};
 
@@ -241,57 +242,116 @@ pub struct CameraSettings {
 
 impl Default for CameraSettings {
     fn default() -> Self {
+        let m = CameraModel::default();
+        let k = m.intrinsics;
         CameraSettings {
-            width: 640,
-            height: 480,
-            fx: 615.0,
-            fy: 615.0,
-            cx: 320.0,
-            cy: 240.0,
-            mount_back_m: 0.10,
-            mount_up_m: 0.07,
+            width: k.width,
+            height: k.height,
+            fx: k.fx,
+            fy: k.fy,
+            cx: k.cx,
+            cy: k.cy,
+            mount_back_m: m.mount_back_m,
+            mount_up_m: m.mount_up_m,
             border_px: 4.0,
         }
     }
 }
 
 impl CameraSettings {
+    /// The camera these settings describe.
+    pub fn model(&self) -> CameraModel {
+        CameraModel {
+            intrinsics: Intrinsics {
+                width: self.width,
+                height: self.height,
+                fx: self.fx,
+                fy: self.fy,
+                cx: self.cx,
+                cy: self.cy,
+            },
+            mount_back_m: self.mount_back_m,
+            mount_up_m: self.mount_up_m,
+        }
+    }
+
     /// Check every field; errors name `camera.<field>`.
     pub fn validate(&self) -> Result<()> {
-        if !(16..=4096).contains(&self.width) {
-            return Err(Error::invalid(
-                "camera.width",
-                format!("must be in 16..=4096, got {}", self.width),
-            ));
-        }
-        if !(16..=4096).contains(&self.height) {
-            return Err(Error::invalid(
-                "camera.height",
-                format!("must be in 16..=4096, got {}", self.height),
-            ));
-        }
-        for (name, v) in [("fx", self.fx), ("fy", self.fy)] {
-            if !(v.is_finite() && v > 1.0) {
-                return Err(Error::invalid(
-                    format!("camera.{name}"),
-                    format!("must be a finite number > 1, got {v}"),
-                ));
-            }
-        }
-        for (name, v, size) in [("cx", self.cx, self.width), ("cy", self.cy, self.height)] {
-            if !(v.is_finite() && v >= 0.0 && v <= size as f64) {
-                return Err(Error::invalid(
-                    format!("camera.{name}"),
-                    format!("must lie in the image [0, {size}], got {v}"),
-                ));
-            }
-        }
-        ensure_finite(
-            "camera.mount",
-            &[self.mount_back_m, self.mount_up_m, self.border_px],
-        )?;
+        self.model().validate("camera")?;
+        ensure_finite("camera.border_px", &[self.border_px])?;
         if self.border_px < 0.0 {
             return Err(Error::invalid("camera.border_px", "must be >= 0"));
+        }
+        Ok(())
+    }
+}
+
+/// The depth channel: an aligned z-depth image per target with a RealSense
+/// D435i-like error model (see [`crate::synth::render::depth`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DepthSettings {
+    /// Write a depth image per target (`depth/<id>.png`).
+    pub enabled: bool,
+    /// Apply the error model (off: the renderer's exact depth, quantised).
+    pub noise: bool,
+    /// Range noise `σ(z) = rms_per_m2 · z²` (1/m).
+    pub rms_per_m2: f64,
+    /// Fraction of pixels with no return anywhere.
+    pub holes: f64,
+    /// A depth step between 4-neighbours larger than this (m) is an edge.
+    pub edge_jump_m: f64,
+    /// Probability that a pixel on an edge has no return.
+    pub edge_dropout: f64,
+    /// Nearest depth with a return (m).
+    pub min_range_m: f64,
+    /// Farthest depth with a return (m); the background lies beyond.
+    pub max_range_m: f64,
+    /// Metres per 16-bit unit (0.001: millimetres).
+    pub scale_m: f64,
+}
+
+impl Default for DepthSettings {
+    fn default() -> Self {
+        DepthSettings {
+            enabled: true,
+            noise: true,
+            rms_per_m2: 0.004,
+            holes: 0.03,
+            edge_jump_m: 0.01,
+            edge_dropout: 0.5,
+            min_range_m: 0.105,
+            max_range_m: 1.5,
+            scale_m: crate::perception::depth::DEFAULT_DEPTH_SCALE_M,
+        }
+    }
+}
+
+impl DepthSettings {
+    /// Check every field; errors name `depth.<field>`.
+    pub fn validate(&self) -> Result<()> {
+        let checks = [
+            ("rms_per_m2", self.rms_per_m2, 0.0, 0.1),
+            ("holes", self.holes, 0.0, 0.5),
+            ("edge_jump_m", self.edge_jump_m, 1e-4, 1.0),
+            ("edge_dropout", self.edge_dropout, 0.0, 1.0),
+            ("min_range_m", self.min_range_m, 0.0, 10.0),
+            ("max_range_m", self.max_range_m, 0.01, 60.0),
+            ("scale_m", self.scale_m, 1e-5, 0.01),
+        ];
+        for (name, v, lo, hi) in checks {
+            if !(v.is_finite() && v >= lo && v <= hi) {
+                return Err(Error::invalid(
+                    format!("depth.{name}"),
+                    format!("must be a finite number in [{lo}, {hi}], got {v}"),
+                ));
+            }
+        }
+        if self.min_range_m >= self.max_range_m {
+            return Err(Error::invalid(
+                "depth.min_range_m",
+                "must be below depth.max_range_m",
+            ));
         }
         Ok(())
     }
@@ -565,6 +625,8 @@ pub struct SynthSettings {
     pub camera: CameraSettings,
     /// Renderer randomisation.
     pub render: RenderSettings,
+    /// The depth channel and its error model.
+    pub depth: DepthSettings,
     /// Demonstrations.
     pub demos: DemoSettings,
     /// Dataset split.
@@ -602,6 +664,7 @@ impl SynthSettings {
         self.plant.validate()?;
         self.camera.validate()?;
         self.render.validate()?;
+        self.depth.validate()?;
         self.demos.validate(self.plant.berry_radius_m.hi)?;
         self.split.validate()
     }

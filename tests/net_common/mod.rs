@@ -98,6 +98,8 @@ pub fn write_dataset(
                 config: c,
                 berry: b,
                 image: entry.image.clone(),
+                depth: None,
+                target_depth_m: None,
                 bbox: bx,
                 center: [(bx[0] + bx[2]) / 2.0, (bx[1] + bx[3]) / 2.0],
                 scene: dpmp::scene::SceneFile { obstacles: vec![] },

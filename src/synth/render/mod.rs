@@ -9,6 +9,7 @@
 //! target berry's box white and filled ([`post`]). The scene is rendered
 //! once per configuration; each target only re-does the cheap last step.
 
+pub mod depth;
 pub mod noise;
 pub mod post;
 pub mod primitives;
@@ -129,13 +130,15 @@ pub fn sample_lighting(settings: &RenderSettings, camera: &Camera, rng: &mut imp
     }
 }
 
-/// Render a plant from `camera` (no box, no sensor noise).
+/// Render a plant from `camera` (no box, no sensor noise): the colour
+/// image and the exact z-depth per pixel (infinite where no primitive is
+/// hit; see [`depth`]).
 pub fn render_plant(
     plant: &Plant,
     camera: &Camera,
     settings: &RenderSettings,
     rng: &mut impl Rng,
-) -> FloatImage {
+) -> (FloatImage, Vec<f64>) {
     let (shapes, materials) = plant_primitives(plant, rng);
     let light = sample_lighting(settings, camera, rng);
     let g = raster::rasterise(camera, &shapes);
@@ -157,10 +160,11 @@ pub fn render_plant(
         height: h,
         pixels,
     };
+    let z = depth::z_depth(&g, camera);
     if settings.blur {
-        img.blurred()
+        (img.blurred(), z)
     } else {
-        img
+        (img, z)
     }
 }
 
@@ -198,7 +202,7 @@ mod tests {
 
     #[test]
     fn box_contains_the_rendered_silhouette_of_the_target() {
-        let cam = Camera::reference_home(&CameraSettings::default()).unwrap();
+        let cam = Camera::reference_home(&CameraSettings::default().model()).unwrap();
         let mut rng = ChaCha8Rng::seed_from_u64(4);
         let plant = sample_plant(
             &PlantSettings::default(),

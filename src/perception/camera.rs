@@ -4,9 +4,10 @@
 //! The camera sits `mount_back_m` behind the TCP along the gripper axis and
 //! `mount_up_m` above it (towards world up, perpendicular to the axis); its
 //! image "up" is world up projected onto the image plane. Images are only
-//! rendered at the home configuration, so the mount is fixed by that pose.
+//! taken at the home configuration, so the mount is fixed by that pose.
+//! [`CameraModel`] (intrinsics and mount) is what a dataset and a model
+//! record, so planning back-projects through the camera the data came from.
 
-use crate::synth::settings::CameraSettings;
 use crate::{Error, Result};
 use nalgebra::{Isometry3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
@@ -29,16 +30,82 @@ pub struct Intrinsics {
     pub cy: f64,
 }
 
-impl Intrinsics {
-    /// The intrinsics part of the camera settings.
-    pub fn from_settings(s: &CameraSettings) -> Intrinsics {
+impl Default for Intrinsics {
+    /// The gripper camera of the synthetic data: 640x480, 615 px focal
+    /// length (a RealSense D435i's colour stream at that size).
+    fn default() -> Self {
         Intrinsics {
-            width: s.width,
-            height: s.height,
-            fx: s.fx,
-            fy: s.fy,
-            cx: s.cx,
-            cy: s.cy,
+            width: 640,
+            height: 480,
+            fx: 615.0,
+            fy: 615.0,
+            cx: 320.0,
+            cy: 240.0,
+        }
+    }
+}
+
+/// The camera as data: intrinsics and its mount on the gripper.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraModel {
+    /// Pinhole intrinsics.
+    pub intrinsics: Intrinsics,
+    /// Camera position behind the TCP along the gripper axis (m).
+    pub mount_back_m: f64,
+    /// Camera position above the gripper axis (m), towards world up.
+    pub mount_up_m: f64,
+}
+
+impl CameraModel {
+    /// Check every field; errors name `<prefix>.<field>`.
+    pub fn validate(&self, prefix: &str) -> Result<()> {
+        let k = &self.intrinsics;
+        for (name, size) in [("width", k.width), ("height", k.height)] {
+            if !(16..=4096).contains(&size) {
+                return Err(Error::invalid(
+                    format!("{prefix}.{name}"),
+                    format!("must be in 16..=4096, got {size}"),
+                ));
+            }
+        }
+        for (name, v) in [("fx", k.fx), ("fy", k.fy)] {
+            if !(v.is_finite() && v > 1.0) {
+                return Err(Error::invalid(
+                    format!("{prefix}.{name}"),
+                    format!("must be a finite number > 1, got {v}"),
+                ));
+            }
+        }
+        for (name, v, size) in [("cx", k.cx, k.width), ("cy", k.cy, k.height)] {
+            if !(v.is_finite() && v >= 0.0 && v <= size as f64) {
+                return Err(Error::invalid(
+                    format!("{prefix}.{name}"),
+                    format!("must lie in the image [0, {size}], got {v}"),
+                ));
+            }
+        }
+        for (name, v) in [
+            ("mount_back_m", self.mount_back_m),
+            ("mount_up_m", self.mount_up_m),
+        ] {
+            if !(v.is_finite() && v.abs() <= 1.0) {
+                return Err(Error::invalid(
+                    format!("{prefix}.{name}"),
+                    format!("must be a finite offset of at most 1 m, got {v}"),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Default for CameraModel {
+    fn default() -> Self {
+        CameraModel {
+            intrinsics: Intrinsics::default(),
+            mount_back_m: 0.10,
+            mount_up_m: 0.07,
         }
     }
 }
@@ -87,11 +154,7 @@ impl Camera {
     }
 
     /// The gripper camera for a TCP at `tcp` with gripper axis `axis`.
-    pub fn on_gripper(
-        settings: &CameraSettings,
-        tcp: Point3<f64>,
-        axis: Vector3<f64>,
-    ) -> Result<Camera> {
+    pub fn on_gripper(model: &CameraModel, tcp: Point3<f64>, axis: Vector3<f64>) -> Result<Camera> {
         let f = axis
             .try_normalize(1e-12)
             .ok_or_else(|| Error::invalid("camera.axis", "must be a non-zero vector"))?;
@@ -104,14 +167,14 @@ impl Camera {
                     "gripper axis must not point straight up or down",
                 )
             })?;
-        let position = tcp - f * settings.mount_back_m + up * settings.mount_up_m;
-        Camera::looking_along(Intrinsics::from_settings(settings), position, f, world_up)
+        let position = tcp - f * model.mount_back_m + up * model.mount_up_m;
+        Camera::looking_along(model.intrinsics, position, f, world_up)
     }
 
     /// The gripper camera at the reference home TCP pose (no robot model).
-    pub fn reference_home(settings: &CameraSettings) -> Result<Camera> {
+    pub fn reference_home(model: &CameraModel) -> Result<Camera> {
         let (p, a) = REFERENCE_HOME_TCP;
-        Camera::on_gripper(settings, Point3::from(p), Vector3::from(a))
+        Camera::on_gripper(model, Point3::from(p), Vector3::from(a))
     }
 
     /// Camera centre in the base frame.
@@ -132,6 +195,14 @@ impl Camera {
         }
         let k = &self.intrinsics;
         Some(([k.fx * c.x / c.z + k.cx, k.fy * c.y / c.z + k.cy], c.z))
+    }
+
+    /// The base-frame point at pixel `(u, v)` and z-depth `z` (distance
+    /// along the optical axis): the inverse of [`Camera::project`].
+    pub fn back_project(&self, u: f64, v: f64, z: f64) -> Point3<f64> {
+        let k = &self.intrinsics;
+        let c = Point3::new((u - k.cx) * z / k.fx, (v - k.cy) * z / k.fy, z);
+        self.pose.transform_point(&c)
     }
 
     /// Unit ray direction (base frame) through pixel `(u, v)`; pixel centres
@@ -178,7 +249,7 @@ mod tests {
     use super::*;
 
     fn cam() -> Camera {
-        Camera::reference_home(&CameraSettings::default()).unwrap()
+        Camera::reference_home(&CameraModel::default()).unwrap()
     }
 
     #[test]
@@ -219,6 +290,20 @@ mod tests {
         assert!(a[1] < 240.0 && (a[0] - 320.0).abs() < 1e-6);
         let axis = Vector3::from(REFERENCE_HOME_TCP.1).normalize();
         assert!((c.ray(320.0, 240.0).dot(&axis) - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn back_projection_inverts_projection() {
+        let c = cam();
+        for p in [
+            Point3::new(0.8, -0.1, 0.6),
+            Point3::new(0.7, 0.12, 0.75),
+            Point3::new(0.9, 0.0, 0.4),
+        ] {
+            let (uv, z) = c.project(&p).unwrap();
+            let back = c.back_project(uv[0], uv[1], z);
+            assert!((back - p).norm() < 1e-9, "{back} vs {p}");
+        }
     }
 
     #[test]
