@@ -2,7 +2,9 @@
 //! normalisation, network, covariance decoding) per iteration, with the
 //! default-size cVAE (the shipped `models/default` when present, else a
 //! freshly initialised network of the same size). Target: <= 10 ms.
-//! Also one tp1 training step (batch 5).
+//! Also one tp1 training step (batch 5), and the whole plan pipeline
+//! (`dpmp::plan`) on a generated plant without and with its aligned depth
+//! image, same run (`cargo bench --bench net -- plan`).
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use dpmp::net::{Arch, Model, ModelConfig, Network};
@@ -75,5 +77,77 @@ fn tp1_step(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, inference, tp1_step);
+/// Plants in the plan benchmark.
+const PLAN_PLANTS: usize = 10;
+
+/// The plan pipeline on generated plants (each with its scene as
+/// obstacles), one iteration plans all of them: the JPEG alone, then the
+/// JPEG and its 16-bit depth PNG (decode, back-projection, the goal it
+/// implies).
+fn plan(c: &mut Criterion) {
+    use dpmp::plan::{predict_and_optimize, PlanInput, TargetInput};
+    use dpmp::robot::Robot;
+    use dpmp::synth::generate::Generator;
+    use dpmp::synth::settings::SynthSettings;
+    use std::sync::Arc;
+    let robot = Arc::new(Robot::panda().expect("panda"));
+    let model = Arc::new(model());
+    let settings = SynthSettings::new(PLAN_PLANTS, 1);
+    let generator = Generator::new(settings, (*robot).clone()).expect("generator");
+    let plants: Vec<_> = (0..PLAN_PLANTS)
+        .map(|k| {
+            let out = generator.config(21, k).expect("plant");
+            let mut jpeg = Vec::new();
+            image::DynamicImage::ImageRgb8(out.images[0].clone())
+                .write_to(
+                    &mut std::io::Cursor::new(&mut jpeg),
+                    image::ImageFormat::Jpeg,
+                )
+                .expect("jpeg");
+            let depth = out.depths[0]
+                .as_ref()
+                .expect("depth")
+                .encode_png()
+                .expect("png");
+            let record = out.records[0].clone();
+            let request: dpmp::optim::OptimizeRequest = serde_json::from_value(serde_json::json!({
+                "prior": {"mean": [], "cov": []},
+                "obstacles": record.scene.obstacles,
+                "clearance_m": 0.02,
+            }))
+            .expect("request");
+            (jpeg, depth, record.bbox, request)
+        })
+        .collect();
+    let run = |with_depth: bool| {
+        for (jpeg, depth, bbox, request) in &plants {
+            let image = image::load_from_memory(jpeg).expect("decode");
+            let target = if with_depth {
+                let d =
+                    dpmp::perception::DepthImage::decode_png(depth, 0.001, "depth").expect("depth");
+                TargetInput::Depth(d, "depth".into())
+            } else {
+                TargetInput::None
+            };
+            let input = PlanInput {
+                image,
+                target_box: *bbox,
+                mask_applied: true,
+                target,
+                goal_standoff_m: None,
+                request: request.clone(),
+            };
+            black_box(
+                predict_and_optimize(&model, &robot, input, &Default::default()).expect("plan"),
+            );
+        }
+    };
+    let mut group = c.benchmark_group("plan");
+    group.sample_size(10);
+    group.bench_function("without_depth_10_plants", |b| b.iter(|| run(false)));
+    group.bench_function("with_depth_10_plants", |b| b.iter(|| run(true)));
+    group.finish();
+}
+
+criterion_group!(benches, inference, tp1_step, plan);
 criterion_main!(benches);

@@ -30,6 +30,8 @@
 //! - [`optim`] — the Mahalanobis-closest trajectory optimiser.
 //! - [`perception`] — the gripper camera model, aligned depth images, and
 //!   the 3-D target position behind a box.
+//! - [`plan`] — the image (+ depth) → prior → goal → optimiser pipeline
+//!   behind `/v1/plan` and `dpmp plan`.
 //! - [`synth`] — synthetic plant scenes, camera renderer, demonstrations.
 //! - [`net`] and [`train`] — the dPMP network in candle and its training.
 //! - [`service`] — the axum HTTP service.
@@ -49,6 +51,7 @@ pub mod error;
 pub mod net;
 pub mod optim;
 pub mod perception;
+pub mod plan;
 pub mod plot;
 pub mod promp;
 pub mod robot;

@@ -55,27 +55,10 @@ fn plan_with_the_shipped_model_gives_a_valid_trajectory() {
     );
     let dir = tempfile::tempdir().unwrap();
     let (data, record) = one_plant(dir.path());
-    let image = data.join(record["image"].as_str().unwrap());
-    let b: Vec<String> = record["box"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap().to_string())
-        .collect();
-    let scene = dir.path().join("scene.json");
-    std::fs::write(&scene, record["scene"].to_string()).unwrap();
-    let o = dpmp(&[
-        "plan",
-        "--image",
-        image.to_str().unwrap(),
-        "--box",
-        &b.join(","),
-        "--mask-applied",
-        "--scene",
-        scene.to_str().unwrap(),
-        "--model",
-        model.to_str().unwrap(),
-    ]);
+    let mut args = plan_args(dir.path(), &data, &record);
+    args.truncate(args.len() - 2); // without --depth
+    args.extend(["--model".into(), model.display().to_string()]);
+    let o = dpmp(&args.iter().map(String::as_str).collect::<Vec<_>>());
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let answer: Value = serde_json::from_slice(&o.stdout).unwrap();
 
@@ -130,4 +113,114 @@ fn plan_with_the_shipped_model_gives_a_valid_trajectory() {
             .as_str()
             .unwrap()
     );
+}
+
+/// `dpmp plan --image … --box … --scene …` arguments for a generated record.
+fn plan_args(dir: &Path, data: &Path, record: &Value) -> Vec<String> {
+    let b: Vec<String> = record["box"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap().to_string())
+        .collect();
+    let scene = dir.join("scene.json");
+    std::fs::write(&scene, record["scene"].to_string()).unwrap();
+    let path = |key: &str| {
+        data.join(record[key].as_str().unwrap())
+            .display()
+            .to_string()
+    };
+    vec![
+        "plan".into(),
+        "--image".into(),
+        path("image"),
+        "--box".into(),
+        b.join(","),
+        "--mask-applied".into(),
+        "--scene".into(),
+        scene.display().to_string(),
+        "--depth".into(),
+        path("depth"),
+    ]
+}
+
+#[test]
+fn plan_with_depth_ends_near_the_demonstrations() {
+    let dir = tempfile::tempdir().unwrap();
+    let (data, record) = one_plant(dir.path());
+    let args = plan_args(dir.path(), &data, &record);
+    let o = dpmp(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let answer: Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(answer["status"], "optimal", "{}", answer["reason"]);
+    assert_eq!(answer["target"]["source"], "depth");
+    let robot = Robot::panda().unwrap();
+    let last = answer["trajectory"]["points"]
+        .as_array()
+        .unwrap()
+        .last()
+        .unwrap()
+        .clone();
+    let q: Vec<f64> = last["positions"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let tcp = robot.tcp_pose(&q).translation.vector;
+    let demos: Vec<f64> = record["final_tcp"]["position"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let error = (tcp - nalgebra::Vector3::from_row_slice(&demos)).norm();
+    assert!(
+        error < 0.015,
+        "final TCP {error} m from the demonstrations' mean"
+    );
+
+    // A depth image of another size is refused, naming the file.
+    let small = dir.path().join("small.png");
+    let d = dpmp::perception::DepthImage::new(8, 8, 0.001, vec![400; 64], "d").unwrap();
+    std::fs::write(&small, d.encode_png().unwrap()).unwrap();
+    let mut bad = args.clone();
+    *bad.last_mut().unwrap() = small.display().to_string();
+    let o = dpmp(&bad.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("small.png") && err.contains("8x8"), "{err}");
+}
+
+#[test]
+fn eval_reports_depth_aware_planning_on_a_dataset_with_depth() {
+    let dir = tempfile::tempdir().unwrap();
+    let (data, record) = one_plant(dir.path());
+    let out = dir.path().join("eval");
+    let o = dpmp(&[
+        "eval",
+        "--model",
+        default_model().to_str().unwrap(),
+        "--data",
+        data.to_str().unwrap(),
+        "--split",
+        "all",
+        "--format",
+        "json",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let report: Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(report["plan_targets"], 1);
+    let figure = |k: &str| report[k].as_f64().unwrap_or_else(|| panic!("{k} missing"));
+    assert!(figure("target_position_error_m") < 0.008);
+    assert!(figure("plan_mean_final_position_error_m") < 0.015);
+    assert!(
+        figure("plan_p95_final_position_error_m")
+            >= figure("plan_mean_final_position_error_m") - 1e-12
+    );
+    assert_eq!(figure("plan_optimal_fraction"), 1.0);
+    assert!(figure("mean_final_position_error_m") > 0.0);
+    assert!(record["target_depth_m"].as_f64().unwrap() > 0.2);
 }

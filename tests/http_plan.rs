@@ -12,6 +12,7 @@ use base64::Engine as _;
 use dpmp::net::Model;
 use dpmp::robot::Robot;
 use dpmp::service::{AppState, RunningServer};
+use dpmp::synth::dataset::TargetRecord;
 use dpmp::synth::generate::Generator;
 use dpmp::synth::settings::SynthSettings;
 use http_support::*;
@@ -30,6 +31,13 @@ fn start_with_default_model() -> RunningServer {
 
 /// One generated target: JPEG bytes, its box and its scene's obstacles.
 fn generated_target() -> (Vec<u8>, [f64; 4], Value) {
+    let (jpeg, _, record) = generated_target_with_depth();
+    let obstacles = serde_json::to_value(&record.scene.obstacles).unwrap();
+    (jpeg, record.bbox, obstacles)
+}
+
+/// One generated target: JPEG bytes, its aligned depth PNG, its record.
+fn generated_target_with_depth() -> (Vec<u8>, Vec<u8>, TargetRecord) {
     let generator = Generator::new(SynthSettings::new(1, 1), Robot::panda().unwrap()).unwrap();
     let out = generator.config(21, 0).unwrap();
     let mut jpeg = Vec::new();
@@ -39,9 +47,8 @@ fn generated_target() -> (Vec<u8>, [f64; 4], Value) {
             image::ImageFormat::Jpeg,
         )
         .unwrap();
-    let record = &out.records[0];
-    let obstacles = serde_json::to_value(&record.scene.obstacles).unwrap();
-    (jpeg, record.bbox, obstacles)
+    let depth = out.depths[0].as_ref().unwrap().encode_png().unwrap();
+    (jpeg, depth, out.records[0].clone())
 }
 
 /// The answer without its wall-clock fields.
@@ -72,6 +79,8 @@ fn plan_with_the_shipped_model_over_http() {
     let (s, answer) = post_json(&c, &url, body.to_string());
     assert_eq!(s, 200, "{answer}");
     assert_valid(&openapi(), "post", "/v1/plan", s, &answer);
+    // Without depth or a target position, no goal is derived.
+    assert!(answer.get("target").is_none());
 
     // The prior: 150 samples x 7 joints, positive spread.
     let mean = answer["prior"]["mean"].as_array().unwrap();
@@ -122,4 +131,160 @@ fn plan_with_the_shipped_model_over_http() {
     assert_eq!(multipart["trajectory"], answer["trajectory"]);
     let (_, again) = post_json(&c, &url, body.to_string());
     assert_eq!(without_times(again), without_times(answer));
+}
+
+fn distance(a: &[f64], b: &[f64]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).powi(2))
+        .sum::<f64>()
+        .sqrt()
+}
+
+fn numbers(v: &Value) -> Vec<f64> {
+    v.as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect()
+}
+
+#[test]
+fn plan_with_depth_goes_to_the_berry_it_measured() {
+    let server = start_with_default_model();
+    let c = client();
+    let url = server.url("/v1/plan");
+    let (jpeg, depth, record) = generated_target_with_depth();
+    let b64 = |b: &[u8]| base64::engine::general_purpose::STANDARD.encode(b);
+    let fields = json!({
+        "target_box": record.bbox,
+        "mask_applied": true,
+        "obstacles": record.scene.obstacles,
+        "clearance_m": CLEARANCE_M,
+    });
+    let mut body = fields.clone();
+    body["image_base64"] = json!(b64(&jpeg));
+    body["depth_base64"] = json!(b64(&depth));
+    let (s, answer) = post_json(&c, &url, body.to_string());
+    assert_eq!(s, 200, "{answer}");
+    assert_valid(&openapi(), "post", "/v1/plan", s, &answer);
+
+    // The measured berry, and the goal 10 cm short of it towards home.
+    let target = &answer["target"];
+    assert_eq!(target["source"], "depth");
+    let position = numbers(&target["position"]);
+    assert!(
+        distance(&position, &record.target_position) < 0.008,
+        "{target}"
+    );
+    let robot = Robot::panda().unwrap();
+    let home = robot.tcp_pose(&robot.home()).translation.vector;
+    let goal = numbers(&target["goal"]);
+    assert!((distance(&goal, &position) - 0.10).abs() < 1e-9);
+    let towards_home =
+        distance(&goal, home.as_slice()) + 0.10 - distance(&position, home.as_slice());
+    assert!(towards_home.abs() < 1e-9, "goal not on the line to home");
+
+    // An optimal plan ends within the goal's tolerance, near the demos.
+    assert_eq!(answer["status"], "optimal", "{}", answer["reason"]);
+    let last = answer["trajectory"]["points"]
+        .as_array()
+        .unwrap()
+        .last()
+        .unwrap()
+        .clone();
+    let tcp = robot
+        .tcp_pose(&numbers(&last["positions"]))
+        .translation
+        .vector;
+    let tolerance = target["goal_tolerance_m"].as_f64().unwrap();
+    assert!(distance(tcp.as_slice(), &goal) <= tolerance + 1e-6);
+    assert!(distance(tcp.as_slice(), &record.final_tcp.position) < 0.015);
+
+    // Multipart with a depth part plans the same; a client position too.
+    let form = reqwest::blocking::multipart::Form::new()
+        .part(
+            "image",
+            reqwest::blocking::multipart::Part::bytes(jpeg.clone()),
+        )
+        .part(
+            "depth",
+            reqwest::blocking::multipart::Part::bytes(depth.clone()),
+        )
+        .text("request", fields.to_string());
+    let (s, multipart) = status_and_json(c.post(&url).multipart(form).send().unwrap());
+    assert_eq!(s, 200, "{multipart}");
+    assert_eq!(multipart["trajectory"], answer["trajectory"]);
+    let mut client_target = fields.clone();
+    client_target["image_base64"] = json!(b64(&jpeg));
+    client_target["target_position"] = json!(position);
+    let (s, own) = post_json(&c, &url, client_target.to_string());
+    assert_eq!(s, 200, "{own}");
+    assert_eq!(own["target"]["source"], "client");
+    assert_eq!(own["target"]["goal"], answer["target"]["goal"]);
+}
+
+#[test]
+fn bad_depth_inputs_are_422_naming_the_field() {
+    let server = start_with_default_model();
+    let c = client();
+    let url = server.url("/v1/plan");
+    let (jpeg, depth, record) = generated_target_with_depth();
+    let b64 = |b: &[u8]| base64::engine::general_purpose::STANDARD.encode(b);
+    let png16 = |w: u32, h: u32, value: u16| {
+        let d = dpmp::perception::DepthImage::new(w, h, 0.001, vec![value; (w * h) as usize], "d");
+        d.unwrap().encode_png().unwrap()
+    };
+    let base = json!({
+        "target_box": record.bbox,
+        "mask_applied": true,
+        "image_base64": b64(&jpeg),
+    });
+    let cases = [
+        (
+            "depth_base64",
+            json!({"depth_base64": b64(&png16(320, 240, 500))}),
+        ),
+        (
+            "depth_base64",
+            json!({"depth_base64": b64(&png16(640, 480, 0))}),
+        ),
+        ("depth_base64", json!({"depth_base64": b64(&jpeg)})),
+        ("depth_base64", json!({"depth_base64": 7})),
+        (
+            "target_position",
+            json!({"depth_base64": b64(&depth), "target_position": [0.7, 0.0, 0.7]}),
+        ),
+        ("target_position", json!({"target_position": [0.7, 0.0]})),
+        (
+            "target_position",
+            json!({"target_position": [0.7, 0.0, 1e9]}),
+        ),
+        ("depth_scale_m", json!({"depth_scale_m": 0.001})),
+        (
+            "depth_scale_m",
+            json!({"depth_base64": b64(&depth), "depth_scale_m": -1.0}),
+        ),
+        ("goal_standoff_m", json!({"goal_standoff_m": 0.1})),
+        (
+            "goal_standoff_m",
+            json!({"depth_base64": b64(&depth), "goal_standoff_m": 2.0}),
+        ),
+        (
+            "goal",
+            json!({"depth_base64": b64(&depth), "goal": {"position": [0.6, 0.0, 0.7]}}),
+        ),
+    ];
+    for (expected, extra) in cases {
+        let mut body = base.clone();
+        for (k, v) in extra.as_object().unwrap() {
+            body[k] = v.clone();
+        }
+        let (s, answer) = post_json(&c, &url, body.to_string());
+        assert_eq!(
+            (s, field(&answer)),
+            (422, Some(expected)),
+            "{extra}: {answer}"
+        );
+    }
 }

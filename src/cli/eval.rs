@@ -1,8 +1,10 @@
-//! `dpmp eval`: the paper's tables for a trained model on a dataset split.
+//! `dpmp eval`: the paper's tables for a trained model on a dataset split,
+//! and the depth-aware planning figures when the dataset has depth.
 
 use crate::net::Model;
 use crate::train::data::load_split;
 use crate::train::eval::{evaluate, to_markdown, write_outputs};
+use crate::train::plan_eval::evaluate_plans;
 use crate::Error;
 use std::path::PathBuf;
 
@@ -38,7 +40,7 @@ pub fn run(args: EvalArgs) -> crate::Result<()> {
     if !matches!(args.format.as_str(), "table" | "json") {
         return Err(Error::invalid("format", "expected table or json"));
     }
-    let model = Model::load(&args.model)?;
+    let model = std::sync::Arc::new(Model::load(&args.model)?);
     let alpha = match args.alpha {
         Some(a) if a.is_finite() && a >= 0.0 => a,
         Some(a) => {
@@ -50,9 +52,10 @@ pub fn run(args: EvalArgs) -> crate::Result<()> {
         None => model.config().training.as_ref().map_or(1.0, |t| t.alpha),
     };
     let data = load_split(&args.data, &args.split, &model.config().preprocess)?;
-    let robot = crate::robot::Robot::panda()?;
+    let robot = std::sync::Arc::new(crate::robot::Robot::panda()?);
     let fk = |q: &[f64]| robot.tcp_pose(q);
-    let (report, embedding) = evaluate(&model, &data.samples, &args.split, alpha, &fk)?;
+    let (mut report, embedding) = evaluate(&model, &data.samples, &args.split, alpha, &fk)?;
+    report.planning = evaluate_plans(&model, &robot, &args.data, &args.split)?;
     let out = args
         .out
         .unwrap_or_else(|| args.model.join(format!("eval-{}", args.split)));

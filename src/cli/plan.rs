@@ -1,10 +1,12 @@
-//! `dpmp plan`: an image and a target box → the network's prior → the
-//! optimiser; prints the `/v1/plan` response JSON.
+//! `dpmp plan`: an image (+ aligned depth) and a target box → the
+//! network's prior → (pre-grasp goal) → the optimiser; prints the
+//! `/v1/plan` response JSON. A shell over [`crate::plan`].
 
 use crate::net::Model;
 use crate::optim::OptimizeRequest;
+use crate::perception::depth::{DepthImage, DEFAULT_DEPTH_SCALE_M};
+use crate::plan::{predict_and_optimize, PlanInput, TargetInput};
 use crate::robot::Robot;
-use crate::service::routes::plan::{predict_and_optimize, PlanInput};
 use crate::{Error, Result};
 use clap::Args;
 use std::path::PathBuf;
@@ -27,6 +29,25 @@ pub struct PlanArgs {
     /// The image already has the target painted as a white box.
     #[arg(long)]
     pub mask_applied: bool,
+    /// Aligned z-depth image (16-bit PNG, same size as the image): the
+    /// berry's 3-D position becomes the pre-grasp goal.
+    #[arg(long)]
+    pub depth: Option<PathBuf>,
+    /// Metres per depth unit (0.001: millimetres).
+    #[arg(long, default_value_t = DEFAULT_DEPTH_SCALE_M)]
+    pub depth_scale: f64,
+    /// The berry centre x,y,z (m, base frame) from your own perception,
+    /// instead of --depth.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        allow_negative_numbers = true,
+        conflicts_with = "depth"
+    )]
+    pub target_position: Option<Vec<f64>>,
+    /// Standoff of the pre-grasp goal short of the berry (m); default 0.1.
+    #[arg(long)]
+    pub goal_standoff: Option<f64>,
     /// Scene file `{"obstacles": [...]}` (request schema).
     #[arg(long)]
     pub scene: Option<PathBuf>,
@@ -69,12 +90,36 @@ pub fn run(args: PlanArgs) -> Result<()> {
     }
     let model = Arc::new(Model::load(&args.model)?);
     let robot = Arc::new(Robot::panda()?);
+    let target = target_input(&args, &image)?;
     let input = PlanInput {
         image,
         target_box,
         mask_applied: args.mask_applied,
+        target,
+        goal_standoff_m: args.goal_standoff,
         request,
     };
     let response = predict_and_optimize(&model, &robot, input, &Default::default())?;
     crate::cli::print_json(&response)
+}
+
+/// The 3-D target of `--depth` or `--target-position`.
+fn target_input(args: &PlanArgs, image: &image::DynamicImage) -> Result<TargetInput> {
+    if let Some(p) = &args.target_position {
+        let p: [f64; 3] = p
+            .clone()
+            .try_into()
+            .map_err(|_| Error::invalid("--target-position", "expected three numbers x,y,z"))?;
+        return Ok(TargetInput::Position(p));
+    }
+    let Some(path) = &args.depth else {
+        return Ok(TargetInput::None);
+    };
+    let bytes = std::fs::read(path).map_err(|e| Error::file(path, e.to_string()))?;
+    let depth = DepthImage::decode_png(&bytes, args.depth_scale, "--depth")
+        .map_err(|e| Error::file(path, e.to_string()))?;
+    depth
+        .check_aligned(image.width(), image.height(), "--depth")
+        .map_err(|e| Error::file(path, e.to_string()))?;
+    Ok(TargetInput::Depth(depth, "--depth".into()))
 }

@@ -178,6 +178,11 @@ pub struct ModelConfig {
     pub output_norm: OutputNorm,
     /// The dataset the weights were trained on, if any.
     pub dataset: Option<DatasetInfo>,
+    /// The camera of the training images (intrinsics and gripper mount):
+    /// planning back-projects depth through it. Configs without it mean
+    /// the synthetic generator's default camera.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub camera: Option<crate::perception::CameraModel>,
     /// Crate version that wrote the file.
     pub code_version: String,
     /// Training record, if trained.
@@ -203,11 +208,18 @@ impl ModelConfig {
             preprocess: PreprocessConfig::default(),
             output_norm: OutputNorm::identity(0),
             dataset: None,
+            camera: None,
             code_version: env!("CARGO_PKG_VERSION").to_string(),
             training: None,
         };
         config.output_norm = OutputNorm::identity(config.n_joints * config.head_outputs());
         config
+    }
+
+    /// The camera of the training images ([`ModelConfig::camera`], or the
+    /// synthetic generator's default).
+    pub fn camera_model(&self) -> crate::perception::CameraModel {
+        self.camera.unwrap_or_default()
     }
 
     /// Covariance code length per joint, `n (n + 1) / 2`.
@@ -232,6 +244,9 @@ impl ModelConfig {
 
     /// Check every field; errors name the field.
     pub fn validate(&self) -> Result<()> {
+        if let Some(camera) = &self.camera {
+            camera.validate("camera")?;
+        }
         if self.format != MODEL_FORMAT {
             return Err(Error::invalid(
                 "format",

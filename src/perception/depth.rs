@@ -88,6 +88,21 @@ impl DepthImage {
         Ok(out.into_inner())
     }
 
+    /// Check that the depth image is aligned with a `width` x `height`
+    /// colour image (same size); the error names `field`.
+    pub fn check_aligned(&self, width: u32, height: u32, field: &str) -> Result<()> {
+        if (self.width, self.height) == (width, height) {
+            return Ok(());
+        }
+        Err(Error::invalid(
+            field,
+            format!(
+                "the depth image is {}x{}, the image {width}x{height}: they must be aligned, same size",
+                self.width, self.height
+            ),
+        ))
+    }
+
     /// Image width (px).
     pub fn width(&self) -> u32 {
         self.width

@@ -43,6 +43,8 @@ pub struct Dataset {
     pub manifest_sha256: String,
     /// The dataset's basis settings.
     pub promp: PrompConfig,
+    /// The camera that took the images (intrinsics and gripper mount).
+    pub camera: crate::perception::CameraModel,
     /// The loaded samples, in manifest split order.
     pub samples: Vec<Sample>,
 }
@@ -70,6 +72,7 @@ pub fn load_split(dir: &Path, split: &str, preprocess: &PreprocessConfig) -> Res
         dir: dir.to_path_buf(),
         manifest_sha256,
         promp: manifest.promp.clone(),
+        camera: manifest.settings.camera.model(),
         samples,
     })
 }

@@ -137,6 +137,10 @@ pub struct EvalReport {
     pub table3: FinalPointTable,
     /// Table III's mean-trajectory position error per base-frame axis.
     pub final_position_by_axis: AxisErrors,
+    /// Depth-aware planning figures, when the dataset has depth (see
+    /// [`super::plan_eval`]); flattened into the report's top level.
+    #[serde(flatten, skip_serializing_if = "Option::is_none")]
+    pub planning: Option<super::plan_eval::PlanEval>,
 }
 
 /// Evaluate a model on samples; returns the report and the embedding.
@@ -226,6 +230,7 @@ pub fn evaluate(
         },
         table3,
         final_position_by_axis: axis_errors(&final_positions),
+        planning: None,
     };
     Ok((report, embedding))
 }
@@ -316,6 +321,20 @@ pub fn to_markdown(report: &EvalReport) -> String {
         );
     }
     s += &format!("| total | | | | {:.3e} |\n\n", report.eq7_total);
+    if let Some(p) = &report.planning {
+        s += &format!(
+            "## Depth-aware planning ({} targets)\n\n| figure | value |\n|---|---|\n\
+             | back-projected berry centre error, median / p95 | {:.1} / {:.1} mm |\n\
+             | plan final TCP vs demonstrations' mean, mean / p95 | {:.1} / {:.1} mm |\n\
+             | plans verified optimal | {:.1} % |\n\n",
+            p.plan_targets,
+            p.target_position_error_m * 1e3,
+            p.target_position_p95_error_m * 1e3,
+            p.plan_mean_final_position_error_m * 1e3,
+            p.plan_p95_final_position_error_m * 1e3,
+            p.plan_optimal_fraction * 100.0
+        );
+    }
     s += "## Table II — latent clustering\n\n| method | clusters | Davies–Bouldin |\n|---|---|---|\n";
     let db = report
         .table2

@@ -12,6 +12,7 @@ pub mod log;
 pub mod losses;
 pub mod norm;
 pub mod phases;
+pub mod plan_eval;
 pub mod trainer;
 
 pub use trainer::{train, ShapeSettings, TrainOutcome, TrainSettings};

@@ -273,6 +273,7 @@ fn build_config(settings: &TrainSettings, train: &Dataset, n_val: usize) -> Resu
     let n_weights = train.samples[0].distribution.mean.len();
     config.n_joints = n_weights / config.promp.n_basis;
     config.output_norm = output_norm(&train.samples, config.n_joints, config.promp.n_basis)?;
+    config.camera = Some(train.camera);
     config.dataset = Some(DatasetInfo {
         dir: settings.data.display().to_string(),
         manifest_sha256: train.manifest_sha256.clone(),

@@ -1,23 +1,30 @@
-//! `POST /v1/plan`: image + target box → network prior → optimiser.
+//! `POST /v1/plan`: image (+ aligned depth) + target box → network prior
+//! → (pre-grasp goal) → optimiser; the pipeline is [`crate::plan`].
 //!
 //! Two encodings of the same request:
 //! - `application/json`: `{"image_base64": "...", "target_box": [x1, y1, x2, y2],
-//!   "mask_applied": false, ...scene and constraint fields of /v1/optimize}`;
-//! - `multipart/form-data`: a part `image` (PNG or JPEG bytes) and a part
-//!   `request` (the same JSON without `image_base64`).
+//!   "mask_applied": false, "depth_base64": "..." (optional 16-bit PNG),
+//!   "depth_scale_m": 0.001, "target_position": [x, y, z] (optional, instead
+//!   of depth), "goal_standoff_m": 0.1, ...scene and constraint fields of
+//!   /v1/optimize}`;
+//! - `multipart/form-data`: a part `image` (PNG or JPEG bytes), optionally a
+//!   part `depth` (16-bit PNG) and a part `request` (the same JSON without
+//!   `image_base64` and `depth_base64`).
 //!
 //! The scene and constraint fields (`promp`, `duration_s`, `start`, `goal`,
 //! `obstacles`, `clearance_m`, `joint_limit_margin_rad`, `samples`,
 //! `options`) are parsed by the optimiser's own request type, so they take
 //! the same defaults and validation; `prior` is not accepted (it is what the
 //! network predicts). The answer is the optimise response plus
-//! `"prior": {"mean": [[T x dof]], "std": [[T x dof]]}` and `"model"`.
+//! `"prior": {"mean": [[T x dof]], "std": [[T x dof]]}`, `"model"` and,
+//! with depth or a target position, `"target"`.
 
 use super::optimize::{check_request_limits, record_solve, solve_control};
-use crate::net::Model;
-use crate::optim::{optimize_with, OptimizeRequest, OptimizeResponse};
-use crate::promp::{Basis, WeightDistribution};
-use crate::robot::Robot;
+use crate::optim::OptimizeRequest;
+use crate::perception::depth::{DepthImage, DEFAULT_DEPTH_SCALE_M};
+use crate::plan::{
+    check_target_position, predict_and_optimize, PlanInput, PlanResponse, TargetInput,
+};
 use crate::service::error::ApiError;
 use crate::service::extract::{from_value, media_type, parse_json, read_body, MediaType};
 use crate::service::image::{decode_base64, decode_image};
@@ -26,48 +33,23 @@ use axum::extract::{FromRequest, Multipart, Request, State};
 use axum::http::StatusCode;
 use axum::Json;
 use image::DynamicImage;
-use nalgebra::DMatrix;
-use serde::Serialize;
 use serde_json::{Map, Value};
-use std::sync::Arc;
 use std::time::Instant;
 
 /// Fields of a plan request that are not optimiser fields.
 const IMAGE_FIELD: &str = "image_base64";
 const BOX_FIELD: &str = "target_box";
 const MASK_FIELD: &str = "mask_applied";
+const DEPTH_FIELD: &str = "depth_base64";
+const DEPTH_PART: &str = "depth";
+const SCALE_FIELD: &str = "depth_scale_m";
+const TARGET_FIELD: &str = "target_position";
+const STANDOFF_FIELD: &str = "goal_standoff_m";
 
-/// A parsed, validated plan request.
-pub struct PlanInput {
-    /// The decoded image.
-    pub image: DynamicImage,
-    /// Target berry box `[x1, y1, x2, y2]` in image pixels.
-    pub target_box: [f64; 4],
-    /// Whether the image already has the target painted (masked).
-    pub mask_applied: bool,
-    /// The optimiser request; its prior is replaced by the prediction.
-    pub request: OptimizeRequest,
-}
-
-/// The predicted prior as trajectories (`T x dof`, rows are time samples).
-#[derive(Debug, Serialize)]
-pub struct PriorTrajectory {
-    /// Mean joint positions.
-    pub mean: Vec<Vec<f64>>,
-    /// Standard deviation of the joint positions.
-    pub std: Vec<Vec<f64>>,
-}
-
-/// Body of a `/v1/plan` answer.
-#[derive(Debug, Serialize)]
-pub struct PlanResponse {
-    /// The optimiser's answer for the predicted prior.
-    #[serde(flatten)]
-    pub result: OptimizeResponse,
-    /// The network's prior.
-    pub prior: PriorTrajectory,
-    /// Name of the model that predicted it.
-    pub model: String,
+/// Encoded inputs of one request: (field naming it in errors, bytes).
+struct Encoded {
+    image: (&'static str, Vec<u8>),
+    depth: Option<(&'static str, Vec<u8>)>,
 }
 
 /// `POST /v1/plan`.
@@ -98,54 +80,6 @@ pub async fn plan(
     Ok(Json(response))
 }
 
-/// The blocking part: network prior, then the optimiser (also used by
-/// `dpmp plan`).
-pub fn predict_and_optimize(
-    model: &Arc<Model>,
-    robot: &Arc<Robot>,
-    input: PlanInput,
-    ctl: &crate::optim::SolveControl,
-) -> crate::Result<PlanResponse> {
-    let prediction = model.predict(&input.image, input.target_box, input.mask_applied)?;
-    let distribution = prediction.distribution;
-    let mut request = input.request;
-    let basis = Basis::new(&request.promp).map_err(|e| e.within("promp"))?;
-    let expected = robot.dof() * basis.n_basis();
-    if distribution.dim() != expected {
-        return Err(crate::Error::invalid(
-            "promp.n_basis",
-            format!(
-                "the model predicts {} weights = {} joints x {} basis functions; \
-                 the request asks for {} x {}",
-                distribution.dim(),
-                robot.dof(),
-                distribution.dim() / robot.dof().max(1),
-                robot.dof(),
-                basis.n_basis()
-            ),
-        ));
-    }
-    let prior = prior_trajectory(&distribution, &basis);
-    request.prior = crate::optim::example::prior_spec(&distribution);
-    let result = optimize_with(&request, robot, ctl)?;
-    Ok(PlanResponse {
-        result,
-        prior,
-        model: model.name().to_string(),
-    })
-}
-
-fn prior_trajectory(d: &WeightDistribution, basis: &Basis) -> PriorTrajectory {
-    PriorTrajectory {
-        mean: rows(&d.trajectory_mean(basis)),
-        std: rows(&d.trajectory_std(basis, 0.0)),
-    }
-}
-
-fn rows(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
-    m.row_iter().map(|r| r.iter().copied().collect()).collect()
-}
-
 async fn parse_json_request(state: &AppState, request: Request) -> Result<PlanInput, ApiError> {
     let bytes = read_body(request, state).await?;
     let mut fields: Map<String, Value> = parse_json(&bytes)?;
@@ -159,8 +93,13 @@ async fn parse_json_request(state: &AppState, request: Request) -> Result<PlanIn
             ))
         }
     };
-    let bytes = decode_base64(IMAGE_FIELD, &image_text)?;
-    finish_input(state, IMAGE_FIELD, &bytes, fields)
+    let image = (IMAGE_FIELD, decode_base64(IMAGE_FIELD, &image_text)?);
+    let depth = match fields.remove(DEPTH_FIELD) {
+        None | Some(Value::Null) => None,
+        Some(Value::String(text)) => Some((DEPTH_FIELD, decode_base64(DEPTH_FIELD, &text)?)),
+        Some(_) => return Err(ApiError::invalid(DEPTH_FIELD, "must be a base64 string")),
+    };
+    finish_input(state, Encoded { image, depth }, fields)
 }
 
 async fn parse_multipart_request(
@@ -171,6 +110,7 @@ async fn parse_multipart_request(
         .await
         .map_err(|e| multipart_error(e.status(), e.body_text()))?;
     let mut image: Option<Vec<u8>> = None;
+    let mut depth: Option<Vec<u8>> = None;
     let mut fields: Option<Map<String, Value>> = None;
     while let Some(part) = multipart
         .next_field()
@@ -184,28 +124,35 @@ async fn parse_multipart_request(
             .map_err(|e| multipart_error(e.status(), e.body_text()))?;
         match name.as_str() {
             "image" if image.is_none() => image = Some(bytes.to_vec()),
+            DEPTH_PART if depth.is_none() => depth = Some(bytes.to_vec()),
             "request" if fields.is_none() => fields = Some(parse_json(&bytes)?),
-            "image" | "request" => {
+            "image" | DEPTH_PART | "request" => {
                 return Err(malformed_multipart(&format!(
                     "the part `{name}` appears twice"
                 )))
             }
             other => {
                 return Err(malformed_multipart(&format!(
-                    "unknown part `{other}`: expected `image` and `request`"
+                    "unknown part `{other}`: expected `image`, `request` and optionally `depth`"
                 )))
             }
         }
     }
     let image = image.ok_or_else(|| malformed_multipart("missing the part `image`"))?;
     let fields = fields.ok_or_else(|| malformed_multipart("missing the part `request`"))?;
-    if fields.contains_key(IMAGE_FIELD) {
-        return Err(ApiError::invalid(
-            IMAGE_FIELD,
-            "send the image either as the `image` part or as base64, not both",
-        ));
+    for (field, part) in [(IMAGE_FIELD, "image"), (DEPTH_FIELD, DEPTH_PART)] {
+        if fields.contains_key(field) {
+            return Err(ApiError::invalid(
+                field,
+                format!("send it either as the `{part}` part or as base64, not both"),
+            ));
+        }
     }
-    finish_input(state, "image", &image, fields)
+    let encoded = Encoded {
+        image: ("image", image),
+        depth: depth.map(|d| (DEPTH_PART, d)),
+    };
+    finish_input(state, encoded, fields)
 }
 
 fn multipart_error(status: StatusCode, text: String) -> ApiError {
@@ -225,11 +172,11 @@ fn malformed_multipart(message: &str) -> ApiError {
 }
 
 /// Validate the non-image fields, build the optimiser request with a
-/// placeholder prior (replaced by the prediction), then decode the image.
+/// placeholder prior (replaced by the prediction), then decode the image
+/// and the depth.
 fn finish_input(
     state: &AppState,
-    image_field: &str,
-    image_bytes: &[u8],
+    encoded: Encoded,
     mut fields: Map<String, Value>,
 ) -> Result<PlanInput, ApiError> {
     if fields.contains_key("prior") {
@@ -244,19 +191,98 @@ fn finish_input(
         Some(Value::Bool(b)) => b,
         Some(_) => return Err(ApiError::invalid(MASK_FIELD, "must be true or false")),
     };
+    let scale = optional_number(&mut fields, SCALE_FIELD)?;
+    if let Some(v) = scale.filter(|v| !(*v > 0.0 && *v <= 1.0)) {
+        return Err(ApiError::invalid(
+            SCALE_FIELD,
+            format!("must be > 0 and <= 1 (m per depth unit), got {v}"),
+        ));
+    }
+    let target_position = optional_position(&mut fields)?;
+    let goal_standoff_m = optional_number(&mut fields, STANDOFF_FIELD)?;
     fields.insert(
         "prior".to_string(),
         serde_json::json!({"mean": [], "cov": []}),
     );
     let request: OptimizeRequest = from_value(Value::Object(fields))?;
+    let (image_field, image_bytes) = &encoded.image;
     let image = decode_image(image_field, image_bytes, state.config().max_image_pixels)?;
     check_box_inside(&target_box, &image)?;
+    let target = match (encoded.depth, target_position) {
+        (Some(_), Some(_)) => {
+            return Err(ApiError::invalid(
+                TARGET_FIELD,
+                "send either a depth image or a target position, not both",
+            ))
+        }
+        (Some((field, bytes)), None) => TargetInput::Depth(
+            decode_depth(field, &bytes, scale, &image)?,
+            field.to_string(),
+        ),
+        (None, Some(p)) => TargetInput::Position(p),
+        (None, None) => TargetInput::None,
+    };
+    if scale.is_some() && !matches!(target, TargetInput::Depth(..)) {
+        return Err(ApiError::invalid(
+            SCALE_FIELD,
+            "applies only with a depth image",
+        ));
+    }
+    if goal_standoff_m.is_some() && matches!(target, TargetInput::None) {
+        return Err(ApiError::invalid(
+            STANDOFF_FIELD,
+            "applies only with a depth image or a target position",
+        ));
+    }
     Ok(PlanInput {
         image,
         target_box,
         mask_applied,
+        target,
+        goal_standoff_m,
         request,
     })
+}
+
+/// A 16-bit depth PNG of the image's size.
+fn decode_depth(
+    field: &str,
+    bytes: &[u8],
+    scale: Option<f64>,
+    image: &DynamicImage,
+) -> Result<DepthImage, ApiError> {
+    let depth = DepthImage::decode_png(bytes, scale.unwrap_or(DEFAULT_DEPTH_SCALE_M), field)?;
+    depth.check_aligned(image.width(), image.height(), field)?;
+    Ok(depth)
+}
+
+/// An optional finite number field.
+fn optional_number(fields: &mut Map<String, Value>, field: &str) -> Result<Option<f64>, ApiError> {
+    match fields.remove(field) {
+        None | Some(Value::Null) => Ok(None),
+        Some(Value::Number(n)) => match n.as_f64() {
+            Some(v) if v.is_finite() => Ok(Some(v)),
+            _ => Err(ApiError::invalid(field, "must be a finite number")),
+        },
+        Some(_) => Err(ApiError::invalid(field, "must be a number")),
+    }
+}
+
+/// The optional `target_position` `[x, y, z]` (m, base frame).
+fn optional_position(fields: &mut Map<String, Value>) -> Result<Option<[f64; 3]>, ApiError> {
+    let Some(value) = fields.remove(TARGET_FIELD).filter(|v| !v.is_null()) else {
+        return Ok(None);
+    };
+    let numbers: Vec<f64> =
+        from_value::<Vec<f64>>(value).map_err(|e| ApiError::invalid(TARGET_FIELD, e.message))?;
+    let p: [f64; 3] = numbers.as_slice().try_into().map_err(|_| {
+        ApiError::invalid(
+            TARGET_FIELD,
+            format!("expected 3 numbers [x, y, z], got {}", numbers.len()),
+        )
+    })?;
+    check_target_position(&p)?;
+    Ok(Some(p))
 }
 
 fn parse_box(value: Option<Value>) -> Result<[f64; 4], ApiError> {

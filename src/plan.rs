@@ -1,0 +1,285 @@
+//! The image → plan pipeline, as one library call ([`predict_and_optimize`]):
+//!
+//! ```text
+//! image + target box ──► network prior (net)
+//! depth + box + camera ──► 3-D berry centre (perception) ──► pre-grasp goal
+//! prior + goal + scene ──► optimiser (optim) ──► trajectory + report
+//! ```
+//!
+//! `POST /v1/plan` and `dpmp plan` are shells over it: they parse their
+//! inputs into a [`PlanInput`] and print or send the [`PlanResponse`].
+//!
+//! **The goal from the target.** When the caller sends an aligned depth
+//! image (or its own 3-D target position), the berry centre becomes a
+//! pre-grasp goal the way the demonstrations were made: `goal_standoff_m`
+//! ([`DEFAULT_GOAL_STANDOFF_M`]) short of the berry along the line from the
+//! home TCP to it, with tolerance [`GOAL_TOLERANCE_M`]. The goal enters as
+//! the optimiser's goal constraint (the final TCP within the tolerance),
+//! so the answer meets it whenever it is `optimal`; the network's prior
+//! still decides the shape of the motion. The depth is back-projected
+//! through the camera the model records ([`crate::net::ModelConfig`]'s
+//! `camera`, the synthetic generator's by default) posed at the robot's
+//! home configuration, where the images are taken. Without depth and
+//! target position the request is planned exactly as before (no goal is
+//! added).
+
+use crate::net::Model;
+use crate::optim::{optimize_with, Goal, OptimizeRequest, OptimizeResponse, SolveControl};
+use crate::perception::{locate_target, Camera, DepthImage};
+use crate::promp::{Basis, WeightDistribution};
+use crate::robot::Robot;
+use crate::{Error, Result};
+use image::DynamicImage;
+use nalgebra::{DMatrix, Point3, Vector3};
+use serde::Serialize;
+use std::sync::Arc;
+
+/// Pre-grasp standoff (m) of a goal derived from the target: the synthetic
+/// demonstrations end this far short of the berry centre.
+pub const DEFAULT_GOAL_STANDOFF_M: f64 = 0.10;
+
+/// Tolerance (m) of a goal derived from the target.
+pub const GOAL_TOLERANCE_M: f64 = 0.005;
+
+/// Largest accepted standoff (m).
+pub const MAX_GOAL_STANDOFF_M: f64 = 0.5;
+
+/// Where the 3-D target comes from.
+#[derive(Clone, Debug, Default)]
+pub enum TargetInput {
+    /// No 3-D target: plan from the image alone.
+    #[default]
+    None,
+    /// An aligned depth image (same size as the camera's images); the
+    /// string names the input in errors (`depth_base64`, `depth`, `--depth`).
+    Depth(DepthImage, String),
+    /// The client's own perception: the berry centre in the base frame (m).
+    Position([f64; 3]),
+}
+
+/// A parsed, validated plan request.
+pub struct PlanInput {
+    /// The decoded image.
+    pub image: DynamicImage,
+    /// Target berry box `[x1, y1, x2, y2]` in image pixels.
+    pub target_box: [f64; 4],
+    /// Whether the image already has the target painted (masked).
+    pub mask_applied: bool,
+    /// The 3-D target, if any.
+    pub target: TargetInput,
+    /// Standoff of the derived goal (m); `None`: [`DEFAULT_GOAL_STANDOFF_M`].
+    pub goal_standoff_m: Option<f64>,
+    /// The optimiser request; its prior is replaced by the prediction.
+    pub request: OptimizeRequest,
+}
+
+/// The predicted prior as trajectories (`T x dof`, rows are time samples).
+#[derive(Debug, Serialize)]
+pub struct PriorTrajectory {
+    /// Mean joint positions.
+    pub mean: Vec<Vec<f64>>,
+    /// Standard deviation of the joint positions.
+    pub std: Vec<Vec<f64>>,
+}
+
+/// Where the 3-D target came from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TargetSource {
+    /// Back-projected from the depth image.
+    Depth,
+    /// Sent by the client (`target_position`).
+    Client,
+}
+
+/// The 3-D target and the goal derived from it.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct TargetReport {
+    /// Berry centre (m, base frame).
+    pub position: [f64; 3],
+    /// Depth of the centre along the camera's optical axis (m), when
+    /// measured.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub depth_m: Option<f64>,
+    /// Where it came from.
+    pub source: TargetSource,
+    /// The pre-grasp goal handed to the optimiser (m, base frame).
+    pub goal: [f64; 3],
+    /// The goal's tolerance (m).
+    pub goal_tolerance_m: f64,
+}
+
+/// Body of a `/v1/plan` answer.
+#[derive(Debug, Serialize)]
+pub struct PlanResponse {
+    /// The optimiser's answer for the predicted prior.
+    #[serde(flatten)]
+    pub result: OptimizeResponse,
+    /// The network's prior.
+    pub prior: PriorTrajectory,
+    /// Name of the model that predicted it.
+    pub model: String,
+    /// The 3-D target, when depth or a target position was given.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub target: Option<TargetReport>,
+}
+
+/// Network prior, goal from the target (if any), then the optimiser.
+pub fn predict_and_optimize(
+    model: &Arc<Model>,
+    robot: &Arc<Robot>,
+    input: PlanInput,
+    ctl: &SolveControl,
+) -> Result<PlanResponse> {
+    let mut request = input.request;
+    let target = locate(model, robot, &input.target, &input.target_box)?;
+    let target = match target {
+        Some(located) => {
+            let report = goal_from_target(robot, located, input.goal_standoff_m)?;
+            if request.goal.is_some() {
+                return Err(Error::invalid(
+                    "goal",
+                    "a goal is derived from the depth / target_position; send one or the other",
+                ));
+            }
+            request.goal = Some(Goal {
+                position: report.goal,
+                tolerance_m: report.goal_tolerance_m,
+            });
+            Some(report)
+        }
+        None => None,
+    };
+    let prediction = model.predict(&input.image, input.target_box, input.mask_applied)?;
+    let distribution = prediction.distribution;
+    let basis = Basis::new(&request.promp).map_err(|e| e.within("promp"))?;
+    check_dimensions(&distribution, robot, &basis)?;
+    let prior = prior_trajectory(&distribution, &basis);
+    request.prior = crate::optim::example::prior_spec(&distribution);
+    let result = optimize_with(&request, robot, ctl)?;
+    Ok(PlanResponse {
+        result,
+        prior,
+        model: model.name().to_string(),
+        target,
+    })
+}
+
+/// The camera that took the image: the model's camera model posed at the
+/// robot's home configuration.
+pub fn capture_camera(model: &Model, robot: &Robot) -> Result<Camera> {
+    let home = robot.tcp_pose(&robot.home());
+    Camera::on_gripper(
+        &model.config().camera_model(),
+        Point3::from(home.translation.vector),
+        home.rotation * Vector3::z(),
+    )
+}
+
+/// A berry centre, its measured depth and where it came from.
+struct Located {
+    position: [f64; 3],
+    depth_m: Option<f64>,
+    source: TargetSource,
+}
+
+/// The berry centre, if the input has one.
+fn locate(
+    model: &Model,
+    robot: &Robot,
+    target: &TargetInput,
+    target_box: &[f64; 4],
+) -> Result<Option<Located>> {
+    match target {
+        TargetInput::None => Ok(None),
+        TargetInput::Position(p) => {
+            check_target_position(p)?;
+            Ok(Some(Located {
+                position: *p,
+                depth_m: None,
+                source: TargetSource::Client,
+            }))
+        }
+        TargetInput::Depth(depth, field) => {
+            let camera = capture_camera(model, robot)?;
+            let t = locate_target(depth, target_box, &camera, field)?;
+            Ok(Some(Located {
+                position: t.position,
+                depth_m: Some(t.depth_m),
+                source: TargetSource::Depth,
+            }))
+        }
+    }
+}
+
+/// Validate a client's `target_position`.
+pub fn check_target_position(p: &[f64; 3]) -> Result<()> {
+    crate::error::ensure_finite("target_position", p)?;
+    if p.iter().any(|c| c.abs() > 5.0) {
+        return Err(Error::invalid(
+            "target_position",
+            format!("{p:?} is more than 5 m from the robot base"),
+        ));
+    }
+    Ok(())
+}
+
+/// The pre-grasp goal `standoff` short of `position` on the line from the
+/// home TCP (see the module docs).
+fn goal_from_target(robot: &Robot, target: Located, standoff: Option<f64>) -> Result<TargetReport> {
+    let Located {
+        position,
+        depth_m,
+        source,
+    } = target;
+    let standoff = standoff.unwrap_or(DEFAULT_GOAL_STANDOFF_M);
+    if !(standoff.is_finite() && (0.0..=MAX_GOAL_STANDOFF_M).contains(&standoff)) {
+        return Err(Error::invalid(
+            "goal_standoff_m",
+            format!("must be a finite number in [0, {MAX_GOAL_STANDOFF_M}], got {standoff}"),
+        ));
+    }
+    let home = robot.tcp_pose(&robot.home()).translation.vector;
+    let berry = Vector3::from(position);
+    let axis = (berry - home)
+        .try_normalize(1e-9)
+        .ok_or_else(|| Error::invalid("target_position", "coincides with the home TCP position"))?;
+    let goal = berry - axis * standoff;
+    Ok(TargetReport {
+        position,
+        depth_m,
+        source,
+        goal: [goal.x, goal.y, goal.z],
+        goal_tolerance_m: GOAL_TOLERANCE_M,
+    })
+}
+
+fn check_dimensions(d: &WeightDistribution, robot: &Robot, basis: &Basis) -> Result<()> {
+    let expected = robot.dof() * basis.n_basis();
+    if d.dim() == expected {
+        return Ok(());
+    }
+    Err(Error::invalid(
+        "promp.n_basis",
+        format!(
+            "the model predicts {} weights = {} joints x {} basis functions; \
+             the request asks for {} x {}",
+            d.dim(),
+            robot.dof(),
+            d.dim() / robot.dof().max(1),
+            robot.dof(),
+            basis.n_basis()
+        ),
+    ))
+}
+
+fn prior_trajectory(d: &WeightDistribution, basis: &Basis) -> PriorTrajectory {
+    PriorTrajectory {
+        mean: rows(&d.trajectory_mean(basis)),
+        std: rows(&d.trajectory_std(basis, 0.0)),
+    }
+}
+
+fn rows(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
+    m.row_iter().map(|r| r.iter().copied().collect()).collect()
+}

@@ -1,0 +1,143 @@
+//! Depth-aware planning on a dataset split: for every target with an
+//! aligned depth image, the full `/v1/plan` pipeline ([`crate::plan`]) runs
+//! with the target's own scene as obstacles, and two things are compared
+//! with the ground truth:
+//!
+//! - the back-projected berry centre against the true one
+//!   (`target_position_error_m`, the median; and the 95th percentile);
+//! - the plan's final TCP against the demonstrations' mean final TCP
+//!   (`plan_mean_final_position_error_m`, `plan_p95_…`), the same reference
+//!   as the network's `mean_final_position_error_m`.
+//!
+//! Targets are planned in parallel; each is independent, so the figures do
+//! not depend on the thread count.
+
+use crate::net::Model;
+use crate::optim::{OptimizeRequest, Status};
+use crate::plan::{predict_and_optimize, PlanInput, TargetInput};
+use crate::robot::Robot;
+use crate::synth::dataset::{self, TargetEntry};
+use crate::{Error, Result};
+use nalgebra::Vector3;
+use rayon::prelude::*;
+use serde::Serialize;
+use std::path::Path;
+use std::sync::Arc;
+
+/// Clearance (m) every evaluation plan keeps from its scene.
+pub const EVAL_CLEARANCE_M: f64 = 0.02;
+
+/// Planning figures of one split (see the module docs).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct PlanEval {
+    /// Targets planned.
+    pub plan_targets: usize,
+    /// Mean distance (m) of the plan's final TCP to the demonstrations'
+    /// mean final TCP.
+    pub plan_mean_final_position_error_m: f64,
+    /// Its 95th percentile (m).
+    pub plan_p95_final_position_error_m: f64,
+    /// Fraction of plans verified `optimal`.
+    pub plan_optimal_fraction: f64,
+    /// Median distance (m) of the back-projected berry centre to the true one.
+    pub target_position_error_m: f64,
+    /// Its 95th percentile (m).
+    pub target_position_p95_error_m: f64,
+}
+
+/// One target's outcome.
+struct Outcome {
+    final_error: f64,
+    target_error: f64,
+    optimal: bool,
+}
+
+/// Plan every target of `split` that has depth; `None` when the dataset
+/// has no depth.
+pub fn evaluate_plans(
+    model: &Arc<Model>,
+    robot: &Arc<Robot>,
+    dir: &Path,
+    split: &str,
+) -> Result<Option<PlanEval>> {
+    let manifest = dataset::load_manifest(dir)?;
+    let scale = manifest.settings.depth.scale_m;
+    let entries: Vec<&TargetEntry> = manifest
+        .split(split)?
+        .into_iter()
+        .filter(|e| e.depth.is_some())
+        .collect();
+    if entries.is_empty() {
+        return Ok(None);
+    }
+    let outcomes = entries
+        .par_iter()
+        .map(|entry| plan_one(model, robot, dir, entry, scale))
+        .collect::<Result<Vec<_>>>()?;
+    let mut finals: Vec<f64> = outcomes.iter().map(|o| o.final_error).collect();
+    let mut targets: Vec<f64> = outcomes.iter().map(|o| o.target_error).collect();
+    let n = outcomes.len() as f64;
+    Ok(Some(PlanEval {
+        plan_targets: outcomes.len(),
+        plan_mean_final_position_error_m: finals.iter().sum::<f64>() / n,
+        plan_p95_final_position_error_m: percentile(&mut finals, 0.95),
+        plan_optimal_fraction: outcomes.iter().filter(|o| o.optimal).count() as f64 / n,
+        target_position_error_m: percentile(&mut targets, 0.5),
+        target_position_p95_error_m: percentile(&mut targets, 0.95),
+    }))
+}
+
+/// The plan of one target, compared with its record.
+fn plan_one(
+    model: &Arc<Model>,
+    robot: &Arc<Robot>,
+    dir: &Path,
+    entry: &TargetEntry,
+    scale: f64,
+) -> Result<Outcome> {
+    let record = dataset::load_record(dir, entry)?;
+    let image = image::DynamicImage::ImageRgb8(dataset::load_image(dir, entry)?);
+    let depth = dataset::load_depth(dir, entry, scale)?
+        .ok_or_else(|| Error::invalid("depth", format!("target {} has no depth", entry.id)))?;
+    let request: OptimizeRequest = serde_json::from_value(serde_json::json!({
+        "prior": {"mean": [], "cov": []},
+        "duration_s": record.duration_s,
+        "start": record.start,
+        "obstacles": record.scene.obstacles,
+        "clearance_m": EVAL_CLEARANCE_M,
+    }))
+    .map_err(|e| Error::invalid("record", format!("{}: {e}", entry.id)))?;
+    let input = PlanInput {
+        image,
+        target_box: record.bbox,
+        mask_applied: true,
+        target: TargetInput::Depth(depth, format!("depth of {}", entry.id)),
+        goal_standoff_m: None,
+        request,
+    };
+    let answer = predict_and_optimize(model, robot, input, &Default::default())?;
+    let last = answer
+        .result
+        .trajectory
+        .points
+        .last()
+        .ok_or_else(|| Error::Numerical(format!("{}: empty trajectory", entry.id)))?;
+    let tcp = robot.tcp_pose(&last.positions).translation.vector;
+    let final_error = (tcp - Vector3::from(record.final_tcp.position)).norm();
+    let located = answer
+        .target
+        .map(|t| Vector3::from(t.position))
+        .ok_or_else(|| Error::Numerical(format!("{}: no target located", entry.id)))?;
+    Ok(Outcome {
+        final_error,
+        target_error: (located - Vector3::from(record.target_position)).norm(),
+        optimal: answer.result.status == Status::Optimal,
+    })
+}
+
+/// The `p` quantile (nearest rank) of `values`.
+fn percentile(values: &mut [f64], p: f64) -> f64 {
+    values.sort_by(f64::total_cmp);
+    let i = ((values.len() as f64 - 1.0) * p).round() as usize;
+    values[i.min(values.len() - 1)]
+}
