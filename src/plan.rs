@@ -21,7 +21,9 @@
 //! `camera`, the synthetic generator's by default) posed at the robot's
 //! home configuration, where the images are taken. Without depth and
 //! target position the request is planned exactly as before (no goal is
-//! added).
+//! added). A model conditioned on depth
+//! ([`crate::net::ModelConfig::depth_condition`]) reads the measured depth,
+//! or a client position's depth in the camera; it cannot plan without one.
 
 use crate::net::Model;
 use crate::optim::{optimize_with, Goal, OptimizeRequest, OptimizeResponse, SolveControl};
@@ -150,7 +152,16 @@ pub fn predict_and_optimize(
         }
         None => None,
     };
-    let prediction = model.predict(&input.image, input.target_box, input.mask_applied)?;
+    let depth_m = match &target {
+        Some(t) => t.depth_m.or(Some(
+            capture_camera(model, robot)?
+                .to_camera(&Point3::from(t.position))
+                .z,
+        )),
+        None => None,
+    };
+    let prediction =
+        model.predict_with_depth(&input.image, input.target_box, input.mask_applied, depth_m)?;
     let distribution = prediction.distribution;
     let basis = Basis::new(&request.promp).map_err(|e| e.within("promp"))?;
     check_dimensions(&distribution, robot, &basis)?;

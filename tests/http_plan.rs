@@ -288,3 +288,33 @@ fn bad_depth_inputs_are_422_naming_the_field() {
         );
     }
 }
+
+#[test]
+fn a_depth_conditioned_model_needs_depth() {
+    let mut config = dpmp::net::ModelConfig::new("depth-cvae", dpmp::net::Arch::Cvae);
+    config.depth_condition = true;
+    let network = dpmp::net::Network::new(config, 3, &candle_core::Device::Cpu).unwrap();
+    let model = Model::from_network(network);
+    let state = AppState::new(test_config(), Robot::panda().unwrap(), Some(model)).unwrap();
+    let server = RunningServer::start(state).unwrap();
+    let c = client();
+    let url = server.url("/v1/plan");
+    let (jpeg, depth, record) = generated_target_with_depth();
+    let b64 = |b: &[u8]| base64::engine::general_purpose::STANDARD.encode(b);
+    let mut body = json!({
+        "target_box": record.bbox,
+        "mask_applied": true,
+        "image_base64": b64(&jpeg),
+        "obstacles": record.scene.obstacles,
+    });
+    let (s, answer) = post_json(&c, &url, body.to_string());
+    assert_eq!((s, field(&answer)), (422, Some("depth_base64")), "{answer}");
+    // With depth (or a 3-D target) it plans.
+    body["depth_base64"] = json!(b64(&depth));
+    let (s, answer) = post_json(&c, &url, body.to_string());
+    assert_eq!(s, 200, "{answer}");
+    body.as_object_mut().unwrap().remove("depth_base64");
+    body["target_position"] = json!(record.target_position);
+    let (s, answer) = post_json(&c, &url, body.to_string());
+    assert_eq!(s, 200, "{answer}");
+}

@@ -16,6 +16,10 @@ pub struct TrainArgs {
     /// Run tp3 (domain-specific latent tuning) after tp2.
     #[arg(long)]
     pub latent_tuning: bool,
+    /// Condition the cVAE on the target's measured depth (needs a dataset
+    /// with depth); such a model needs depth to plan.
+    #[arg(long)]
+    pub depth_condition: bool,
     /// Output model directory (e.g. models/NAME).
     #[arg(long)]
     pub out: PathBuf,
@@ -62,6 +66,7 @@ impl TrainArgs {
     pub fn settings(&self) -> crate::Result<TrainSettings> {
         let mut s = TrainSettings::new(&self.data, &self.out, Arch::parse(&self.arch)?);
         s.latent_tuning = self.latent_tuning;
+        s.depth_condition = self.depth_condition;
         s.seed = self.seed;
         s.epochs_tp1 = self.epochs_tp1.unwrap_or(s.epochs_tp1);
         s.epochs_tp2 = self.epochs_tp2.unwrap_or(s.epochs_tp2);

@@ -183,6 +183,10 @@ pub struct ModelConfig {
     /// the synthetic generator's default camera.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub camera: Option<crate::perception::CameraModel>,
+    /// The cVAE condition includes the target's depth (beside the box
+    /// centre); such a model needs depth (or a 3-D target) to predict.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub depth_condition: bool,
     /// Crate version that wrote the file.
     pub code_version: String,
     /// Training record, if trained.
@@ -209,6 +213,7 @@ impl ModelConfig {
             output_norm: OutputNorm::identity(0),
             dataset: None,
             camera: None,
+            depth_condition: false,
             code_version: env!("CARGO_PKG_VERSION").to_string(),
             training: None,
         };
@@ -232,9 +237,20 @@ impl ModelConfig {
         self.promp.n_basis + self.code_len()
     }
 
-    /// Size of the vector the heads read: latent plus 2 for the cVAE condition.
+    /// Size of the cVAE condition: the box centre, and the depth when
+    /// [`ModelConfig::depth_condition`].
+    pub fn condition_dim(&self) -> usize {
+        2 + usize::from(self.depth_condition)
+    }
+
+    /// Size of the vector the heads read: latent plus the cVAE condition.
     pub fn feature_dim(&self) -> usize {
-        self.latent_dim + if self.arch.is_conditional() { 2 } else { 0 }
+        self.latent_dim
+            + if self.arch.is_conditional() {
+                self.condition_dim()
+            } else {
+                0
+            }
     }
 
     /// Side of the feature map after the encoder's conv blocks.
@@ -246,6 +262,12 @@ impl ModelConfig {
     pub fn validate(&self) -> Result<()> {
         if let Some(camera) = &self.camera {
             camera.validate("camera")?;
+        }
+        if self.depth_condition && !self.arch.is_conditional() {
+            return Err(Error::invalid(
+                "depth_condition",
+                "only a conditional architecture (cvae) reads a condition",
+            ));
         }
         if self.format != MODEL_FORMAT {
             return Err(Error::invalid(
@@ -305,6 +327,42 @@ fn check_range(field: &str, value: usize, lo: usize, hi: usize) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn depth_condition_adds_one_feature_and_needs_a_conditional_model() {
+        let mut config = ModelConfig::new("d", Arch::Cvae);
+        config.depth_condition = true;
+        assert_eq!((config.condition_dim(), config.feature_dim()), (3, 259));
+        config.validate().unwrap();
+        let mut ae = ModelConfig::new("d", Arch::Ae);
+        ae.depth_condition = true;
+        assert_eq!(ae.validate().unwrap_err().field(), Some("depth_condition"));
+        // Configs written before the field load as box-only models.
+        let mut json = serde_json::to_value(ModelConfig::new("old", Arch::Cvae)).unwrap();
+        json.as_object_mut().unwrap().remove("depth_condition");
+        let old: ModelConfig = serde_json::from_value(json).unwrap();
+        assert!(!old.depth_condition && old.camera.is_none());
+        assert_eq!(
+            old.camera_model(),
+            crate::perception::CameraModel::default()
+        );
+    }
+
+    #[test]
+    fn the_depth_condition_is_normalised_and_required() {
+        let p = crate::net::preprocess::Prepared {
+            pixels: Vec::new(),
+            condition: [0.25, 0.5],
+            depth_m: Some(0.55),
+        };
+        let v = p.condition_values(true).unwrap();
+        assert_eq!(v.len(), 3);
+        assert!((v[2] - 1.0).abs() < 1e-6);
+        assert_eq!(p.condition_values(false).unwrap(), vec![0.25, 0.5]);
+        let none = crate::net::preprocess::Prepared { depth_m: None, ..p };
+        let e = none.condition_values(true).unwrap_err();
+        assert_eq!(e.field(), Some("depth_base64"));
+    }
 
     #[test]
     fn default_config_is_valid_and_round_trips() {

@@ -81,7 +81,21 @@ impl Model {
         target_box: [f64; 4],
         mask_applied: bool,
     ) -> Result<Prediction> {
-        let prepared = self.preprocess(image, target_box, mask_applied)?;
+        self.predict_with_depth(image, target_box, mask_applied, None)
+    }
+
+    /// [`Model::predict`] with the target's depth (m, camera z of the berry
+    /// centre) for a model conditioned on it; a depth-conditioned model
+    /// without one is an error naming the depth input.
+    pub fn predict_with_depth(
+        &self,
+        image: &image::DynamicImage,
+        target_box: [f64; 4],
+        mask_applied: bool,
+        depth_m: Option<f64>,
+    ) -> Result<Prediction> {
+        let mut prepared = self.preprocess(image, target_box, mask_applied)?;
+        prepared.depth_m = depth_m;
         let mut out = self.predict_prepared(std::slice::from_ref(&prepared))?;
         out.pop()
             .ok_or_else(|| Error::Numerical("empty prediction batch".into()))
@@ -106,8 +120,8 @@ impl Model {
     }
 }
 
-/// Stack preprocessed inputs into `(B, 3, S, S)` images and `(B, 2)`
-/// conditions.
+/// Stack preprocessed inputs into `(B, 3, S, S)` images and `(B, C)`
+/// conditions (`C` = [`ModelConfig::condition_dim`]).
 pub fn stack_prepared(
     batch: &[Prepared],
     config: &ModelConfig,
@@ -116,7 +130,8 @@ pub fn stack_prepared(
     let side = config.preprocess.input_size;
     let expected = 3 * side * side;
     let mut pixels = Vec::with_capacity(batch.len() * expected);
-    let mut conditions = Vec::with_capacity(batch.len() * 2);
+    let dim = config.condition_dim();
+    let mut conditions = Vec::with_capacity(batch.len() * dim);
     for (i, p) in batch.iter().enumerate() {
         if p.pixels.len() != expected {
             return Err(Error::invalid(
@@ -125,10 +140,10 @@ pub fn stack_prepared(
             ));
         }
         pixels.extend_from_slice(&p.pixels);
-        conditions.extend_from_slice(&p.condition);
+        conditions.extend(p.condition_values(config.depth_condition)?);
     }
     let images = Tensor::from_vec(pixels, (batch.len(), 3, side, side), device);
-    let conditions = Tensor::from_vec(conditions, (batch.len(), 2), device);
+    let conditions = Tensor::from_vec(conditions, (batch.len(), dim), device);
     Ok((
         images.map_err(candle_error)?,
         conditions.map_err(candle_error)?,

@@ -62,6 +62,34 @@ pub struct Prepared {
     pub pixels: Vec<f32>,
     /// Box centre normalised by the image width and height.
     pub condition: [f32; 2],
+    /// The target's depth (m, camera z of the berry centre), for models
+    /// conditioned on it ([`crate::net::ModelConfig::depth_condition`]).
+    pub depth_m: Option<f64>,
+}
+
+/// Centre (m) of the depth condition's normalisation.
+pub const DEPTH_CONDITION_CENTRE_M: f64 = 0.45;
+
+/// Scale (m) of the depth condition's normalisation.
+pub const DEPTH_CONDITION_SCALE_M: f64 = 0.1;
+
+impl Prepared {
+    /// The condition vector a model with `depth_condition` reads: the box
+    /// centre, then (when asked) the normalised depth; an error naming the
+    /// depth input when the model needs depth and there is none.
+    pub fn condition_values(&self, depth_condition: bool) -> Result<Vec<f32>> {
+        let mut values = self.condition.to_vec();
+        if depth_condition {
+            let depth = self.depth_m.ok_or_else(|| {
+                Error::invalid(
+                    "depth_base64",
+                    "this model is conditioned on the target's depth: send an aligned depth image (depth_base64, --depth) or target_position",
+                )
+            })?;
+            values.push(((depth - DEPTH_CONDITION_CENTRE_M) / DEPTH_CONDITION_SCALE_M) as f32);
+        }
+        Ok(values)
+    }
 }
 
 /// Validate a target box `[x1, y1, x2, y2]` in pixels of a `width x height`
@@ -140,6 +168,7 @@ pub fn prepare(
     Ok(Prepared {
         pixels: resize_normalise(image, config.input_size, paint, config.scale, config.shift),
         condition: box_condition(target_box, width, height),
+        depth_m: None,
     })
 }
 

@@ -81,8 +81,9 @@ fn load_sample(dir: &Path, entry: &TargetEntry, preprocess: &PreprocessConfig) -
     let record = dataset::load_record(dir, entry)?;
     let image = dataset::load_image(dir, entry)?;
     let record_path = dir.join(&entry.record);
-    let prepared = preprocess::prepare(&image, record.bbox, true, preprocess)
+    let mut prepared = preprocess::prepare(&image, record.bbox, true, preprocess)
         .map_err(|e| Error::file(&record_path, e.to_string()))?;
+    prepared.depth_m = record.target_depth_m;
     let distribution = record
         .weight_distribution()
         .map_err(|e| Error::file(&record_path, e.to_string()))?;

@@ -249,7 +249,7 @@ impl<'a> PhaseContext<'a> {
             None => None,
         };
         let z = sample_latent(&mu, logvar.as_ref(), rng)?;
-        let conditions = condition_tensor(samples, indices, self.device())?;
+        let conditions = condition_tensor(samples, indices, net.config(), self.device())?;
         let features = net.features(&z, &conditions).map_err(candle_error)?;
         let out = net.heads(&features).map_err(candle_error)?;
         let (mean, cov) = target_tensors(samples, indices, net.config(), self.device())?;
@@ -260,12 +260,21 @@ impl<'a> PhaseContext<'a> {
     }
 }
 
-fn condition_tensor(samples: &[Sample], indices: &[usize], device: &Device) -> Result<Tensor> {
-    let values: Vec<f32> = indices
-        .iter()
-        .flat_map(|&i| samples[i].prepared.condition)
-        .collect();
-    Tensor::from_vec(values, (indices.len(), 2), device).map_err(candle_error)
+fn condition_tensor(
+    samples: &[Sample],
+    indices: &[usize],
+    config: &crate::net::ModelConfig,
+    device: &Device,
+) -> Result<Tensor> {
+    let mut values = Vec::with_capacity(indices.len() * config.condition_dim());
+    for &i in indices {
+        values.extend(
+            samples[i]
+                .prepared
+                .condition_values(config.depth_condition)?,
+        );
+    }
+    Tensor::from_vec(values, (indices.len(), config.condition_dim()), device).map_err(candle_error)
 }
 
 /// Reparameterisation: `mu + exp(logvar / 2) * eps` with `eps ~ N(0, I)`

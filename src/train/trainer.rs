@@ -61,6 +61,9 @@ pub struct TrainSettings {
     pub arch: Arch,
     /// Run tp3 (latent tuning) after tp2.
     pub latent_tuning: bool,
+    /// Condition the cVAE on the target's measured depth as well as the
+    /// box centre (the dataset must have depth).
+    pub depth_condition: bool,
     /// Seed of every random choice.
     pub seed: u64,
     /// Maximum epochs of tp1.
@@ -100,6 +103,7 @@ impl TrainSettings {
             out: out.to_path_buf(),
             arch,
             latent_tuning: false,
+            depth_condition: false,
             seed: 0,
             epochs_tp1: 30,
             epochs_tp2: 60,
@@ -137,6 +141,12 @@ impl TrainSettings {
         }
         if self.patience == 0 {
             return Err(Error::invalid("patience", "must be at least 1"));
+        }
+        if self.depth_condition && !self.arch.is_conditional() {
+            return Err(Error::invalid(
+                "depth_condition",
+                "only the cvae architecture reads a condition",
+            ));
         }
         if self.latent_tuning && self.arch == Arch::Direct {
             return Err(Error::invalid(
@@ -265,6 +275,19 @@ fn build_config(settings: &TrainSettings, train: &Dataset, n_val: usize) -> Resu
         .unwrap_or_else(|| "model".into());
     let mut config = ModelConfig::new(&name, settings.arch);
     config.latent_tuning = settings.latent_tuning;
+    config.depth_condition = settings.depth_condition;
+    if settings.depth_condition {
+        if let Some(s) = train.samples.iter().find(|s| s.prepared.depth_m.is_none()) {
+            return Err(Error::invalid(
+                "depth_condition",
+                format!(
+                    "target {} of {} has no measured depth: generate the data with depth (dpmp-dataset/2)",
+                    s.id,
+                    settings.data.display()
+                ),
+            ));
+        }
+    }
     config.latent_dim = settings.shape.latent_dim;
     config.encoder_channels = settings.shape.encoder_channels.clone();
     config.head_hidden = settings.shape.head_hidden.clone();
