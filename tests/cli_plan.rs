@@ -224,3 +224,44 @@ fn eval_reports_depth_aware_planning_on_a_dataset_with_depth() {
     assert!(figure("mean_final_position_error_m") > 0.0);
     assert!(record["target_depth_m"].as_f64().unwrap() > 0.2);
 }
+
+#[test]
+fn eval_on_a_test_split_reports_the_condition_only_baseline() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let o = dpmp(&[
+        "data",
+        "generate",
+        "--out",
+        data.to_str().unwrap(),
+        "--configs",
+        "10",
+        "--berries-per-config",
+        "1",
+        "--demos",
+        "2",
+        "--seed",
+        "5",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let out = dir.path().join("eval");
+    let o = dpmp(&[
+        "eval",
+        "--model",
+        default_model().to_str().unwrap(),
+        "--data",
+        data.to_str().unwrap(),
+        "--format",
+        "json",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let report: Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(report["split"], "test");
+    assert_eq!(report["baseline_inputs"], "box centre + depth");
+    let error = report["baseline_mean_final_position_error_m"]
+        .as_f64()
+        .unwrap();
+    assert!(error.is_finite() && error > 0.0, "{error}");
+}

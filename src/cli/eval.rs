@@ -2,6 +2,7 @@
 //! and the depth-aware planning figures when the dataset has depth.
 
 use crate::net::Model;
+use crate::train::baseline::evaluate_baseline;
 use crate::train::data::load_split;
 use crate::train::eval::{evaluate, to_markdown, write_outputs};
 use crate::train::plan_eval::evaluate_plans;
@@ -56,6 +57,16 @@ pub fn run(args: EvalArgs) -> crate::Result<()> {
     let fk = |q: &[f64]| robot.tcp_pose(q);
     let (mut report, embedding) = evaluate(&model, &data.samples, &args.split, alpha, &fk)?;
     report.planning = evaluate_plans(&model, &robot, &args.data, &args.split)?;
+    if matches!(args.split.as_str(), "val" | "test") {
+        let train = load_split(&args.data, "train", &model.config().preprocess)?;
+        let basis = crate::promp::Basis::new(&data.promp)?;
+        report.baseline = Some(evaluate_baseline(
+            &train.samples,
+            &data.samples,
+            &basis,
+            &fk,
+        )?);
+    }
     let out = args
         .out
         .unwrap_or_else(|| args.model.join(format!("eval-{}", args.split)));

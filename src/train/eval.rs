@@ -141,6 +141,10 @@ pub struct EvalReport {
     /// [`super::plan_eval`]); flattened into the report's top level.
     #[serde(flatten, skip_serializing_if = "Option::is_none")]
     pub planning: Option<super::plan_eval::PlanEval>,
+    /// The condition-only baseline, when a training split was available
+    /// (see [`super::baseline`]); flattened into the report's top level.
+    #[serde(flatten, skip_serializing_if = "Option::is_none")]
+    pub baseline: Option<super::baseline::BaselineEval>,
 }
 
 /// Evaluate a model on samples; returns the report and the embedding.
@@ -231,6 +235,7 @@ pub fn evaluate(
         table3,
         final_position_by_axis: axis_errors(&final_positions),
         planning: None,
+        baseline: None,
     };
     Ok((report, embedding))
 }
@@ -321,6 +326,12 @@ pub fn to_markdown(report: &EvalReport) -> String {
         );
     }
     s += &format!("| total | | | | {:.3e} |\n\n", report.eq7_total);
+    if let Some(b) = &report.baseline {
+        s += &format!(
+            "Condition-only baseline ({}, no image; ridge regression on the training split): final TCP error of the mean {:.4} m (the network: {:.4} m).\n\n",
+            b.baseline_inputs, b.baseline_mean_final_position_error_m, report.mean_final_position_error_m
+        );
+    }
     if let Some(p) = &report.planning {
         s += &format!(
             "## Depth-aware planning ({} targets)\n\n| figure | value |\n|---|---|\n\

@@ -5,6 +5,7 @@
 //! the paper's evaluation tables (I, II, III).
 
 pub mod adam;
+pub mod baseline;
 pub mod data;
 pub mod embedding;
 pub mod eval;
