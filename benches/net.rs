@@ -41,8 +41,9 @@ fn inference(c: &mut Criterion) {
     group.bench_function("predict_640x480_jpeg", |b| {
         b.iter(|| {
             let image = image::load_from_memory(black_box(&jpeg)).expect("decode");
+            // A typical berry depth, read only by a depth-conditioned model.
             let p = model
-                .predict(&image, [300.0, 200.0, 340.0, 250.0], false)
+                .predict_with_depth(&image, [300.0, 200.0, 340.0, 250.0], false, Some(0.45))
                 .expect("predict");
             black_box(p.distribution.mean[0])
         })

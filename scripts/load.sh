@@ -79,7 +79,7 @@ echo "== $(nproc) cores, profile $PROFILE, $DURATION per point"
 [ "${ROUTES:-all}" = plan ] || bench_route /v1/optimize "$OUT/optimize.json"
 
 if [ -f models/default/config.json ] && command -v python3 >/dev/null; then
-  # A real generated plant (its image as a 640x480 JPEG, its box and scene).
+  # A real generated plant (its image as a 640x480 JPEG, its depth PNG, box and scene).
   python3 -c "import PIL" 2>/dev/null || python3 -m pip install --quiet pillow
   rm -rf "$OUT/plant"
   "$BIN" data generate --out "$OUT/plant" --configs 1 --berries-per-config 1 --demos 2 --seed 5 >/dev/null
@@ -92,9 +92,11 @@ entry = (manifest.get("targets") or manifest.get("entries"))[0]
 record = json.load(open(f"{data_dir}/{entry['record']}"))
 buf = io.BytesIO()
 Image.open(f"{data_dir}/{record['image']}").convert("RGB").save(buf, format="JPEG", quality=90)
-json.dump({"image_base64": base64.b64encode(buf.getvalue()).decode(), "target_box": record["box"],
-           "mask_applied": True, "obstacles": record["scene"]["obstacles"], "clearance_m": 0.02},
-          open(out, "w"))
+body = {"image_base64": base64.b64encode(buf.getvalue()).decode(), "target_box": record["box"],
+        "mask_applied": True, "obstacles": record["scene"]["obstacles"], "clearance_m": 0.02}
+if record.get("depth"):  # the aligned depth image: the depth-aware plan
+    body["depth_base64"] = base64.b64encode(open(f"{data_dir}/{record['depth']}", "rb").read()).decode()
+json.dump(body, open(out, "w"))
 PY
   bench_route /v1/plan "$OUT/plan.json"
 else

@@ -71,7 +71,7 @@ fn model_mode_runs_the_plan_pipeline_and_reports_final_tcp_error() {
         let record = load_record(&data, entry).unwrap();
         let image = image::DynamicImage::ImageRgb8(load_image(&data, entry).unwrap());
         let prior = model
-            .predict(&image, record.bbox, true)
+            .predict_with_depth(&image, record.bbox, true, record.target_depth_m)
             .unwrap()
             .distribution;
         let basis = dpmp::promp::Basis::new(&record.promp).unwrap();

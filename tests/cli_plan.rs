@@ -1,7 +1,7 @@
 //! `dpmp plan` end to end with the shipped `models/default`: a one-plant
 //! dataset is generated into a temp dir with `dpmp data generate`, and the
-//! plan answer for one of its images (box and scene from the record) is
-//! checked: a 150 x 7 prior with positive spread, a trajectory inside the
+//! plan answer for one of its images (box, depth and scene from the record)
+//! is checked: a 150 x 7 prior with positive spread, a trajectory inside the
 //! Panda's joint limits, a known status and a finite clearance report.
 
 use dpmp::robot::Robot;
@@ -56,7 +56,6 @@ fn plan_with_the_shipped_model_gives_a_valid_trajectory() {
     let dir = tempfile::tempdir().unwrap();
     let (data, record) = one_plant(dir.path());
     let mut args = plan_args(dir.path(), &data, &record);
-    args.truncate(args.len() - 2); // without --depth
     args.extend(["--model".into(), model.display().to_string()]);
     let o = dpmp(&args.iter().map(String::as_str).collect::<Vec<_>>());
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));

@@ -66,21 +66,20 @@ fn plan_with_the_shipped_model_over_http() {
     let server = start_with_default_model();
     let c = client();
     let url = server.url("/v1/plan");
-    let (jpeg, bbox, obstacles) = generated_target();
-    let b64 = base64::engine::general_purpose::STANDARD.encode(&jpeg);
+    let (jpeg, depth, record) = generated_target_with_depth();
+    let b64 = |b: &[u8]| base64::engine::general_purpose::STANDARD.encode(b);
     let fields = json!({
-        "target_box": bbox,
+        "target_box": record.bbox,
         "mask_applied": true,
-        "obstacles": obstacles,
+        "obstacles": record.scene.obstacles,
         "clearance_m": CLEARANCE_M,
     });
     let mut body = fields.clone();
-    body["image_base64"] = json!(b64);
+    body["image_base64"] = json!(b64(&jpeg));
+    body["depth_base64"] = json!(b64(&depth));
     let (s, answer) = post_json(&c, &url, body.to_string());
     assert_eq!(s, 200, "{answer}");
     assert_valid(&openapi(), "post", "/v1/plan", s, &answer);
-    // Without depth or a target position, no goal is derived.
-    assert!(answer.get("target").is_none());
 
     // The prior: 150 samples x 7 joints, positive spread.
     let mean = answer["prior"]["mean"].as_array().unwrap();
@@ -118,17 +117,44 @@ fn plan_with_the_shipped_model_over_http() {
         assert!(clearance >= CLEARANCE_M - 1e-6, "clearance {clearance}");
     }
 
-    // Multipart (image part + JSON part) plans the same trajectory, and
-    // the same JSON request gives the same answer.
+    // Multipart (image and depth parts + JSON part) plans the same
+    // trajectory, and the same JSON request gives the same answer.
     let form = reqwest::blocking::multipart::Form::new()
         .part(
             "image",
             reqwest::blocking::multipart::Part::bytes(jpeg).file_name("plant.jpg"),
         )
+        .part("depth", reqwest::blocking::multipart::Part::bytes(depth))
         .text("request", fields.to_string());
     let (s, multipart) = status_and_json(c.post(&url).multipart(form).send().unwrap());
     assert_eq!(s, 200, "{multipart}");
     assert_eq!(multipart["trajectory"], answer["trajectory"]);
+    let (_, again) = post_json(&c, &url, body.to_string());
+    assert_eq!(without_times(again), without_times(answer));
+}
+
+#[test]
+fn without_depth_or_target_no_goal_is_derived() {
+    // A box-only model (freshly initialised: the path, not the accuracy).
+    let config = dpmp::net::ModelConfig::new("box-only", dpmp::net::Arch::Cvae);
+    let network = dpmp::net::Network::new(config, 5, &candle_core::Device::Cpu).unwrap();
+    let model = Model::from_network(network);
+    let state = AppState::new(test_config(), Robot::panda().unwrap(), Some(model)).unwrap();
+    let server = RunningServer::start(state).unwrap();
+    let c = client();
+    let url = server.url("/v1/plan");
+    let (jpeg, bbox, obstacles) = generated_target();
+    let body = json!({
+        "image_base64": base64::engine::general_purpose::STANDARD.encode(&jpeg),
+        "target_box": bbox,
+        "mask_applied": true,
+        "obstacles": obstacles,
+        "clearance_m": CLEARANCE_M,
+    });
+    let (s, answer) = post_json(&c, &url, body.to_string());
+    assert_eq!(s, 200, "{answer}");
+    assert_valid(&openapi(), "post", "/v1/plan", s, &answer);
+    assert!(answer.get("target").is_none());
     let (_, again) = post_json(&c, &url, body.to_string());
     assert_eq!(without_times(again), without_times(answer));
 }
