@@ -328,7 +328,7 @@ pub fn to_markdown(report: &EvalReport) -> String {
     s += &format!("| total | | | | {:.3e} |\n\n", report.eq7_total);
     if let Some(b) = &report.baseline {
         s += &format!(
-            "Condition-only baseline ({}, no image; ridge regression on the training split): final TCP error of the mean {:.4} m (the network: {:.4} m).\n\n",
+            "Condition-only baseline ({}, no image; nearest training target): final TCP error of the mean {:.4} m (the network: {:.4} m).\n\n",
             b.baseline_inputs, b.baseline_mean_final_position_error_m, report.mean_final_position_error_m
         );
     }
