@@ -37,6 +37,7 @@
 //! - [`service`] — the axum HTTP service.
 //! - [`bench`] — the offline benchmark runner.
 //! - [`plot`] — shared plotting helpers (plotters).
+//! - [`fsio`] — whole-or-nothing file writes, shared by every writer.
 //!
 //! ## Conventions
 //!
@@ -48,6 +49,7 @@
 pub mod bench;
 pub mod cli;
 pub mod error;
+pub mod fsio;
 pub mod net;
 pub mod optim;
 pub mod perception;

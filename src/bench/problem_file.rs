@@ -153,16 +153,7 @@ pub fn load_dir(dir: &Path) -> Result<Vec<(String, Result<ProblemFile>)>> {
         .collect())
 }
 
-/// Write `bytes` to `path` through a temporary sibling and a rename, so a
-/// failure never leaves a partial file.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let tmp = path.with_extension("partial");
-    std::fs::write(&tmp, bytes).map_err(|e| Error::file(&tmp, e.to_string()))?;
-    std::fs::rename(&tmp, path).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        Error::file(path, e.to_string())
-    })
-}
+pub use crate::fsio::write_atomic;
 
 fn take_block<T: serde::de::DeserializeOwned>(
     map: &mut Map<String, Value>,

@@ -210,15 +210,7 @@ pub fn write_dir(dir: &Path, index: usize, joints: &[JointAnnotation]) -> Result
     Ok(())
 }
 
-/// Write `bytes` to `path` via a temporary file in the same folder.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let tmp = path.with_extension("tmp");
-    std::fs::write(&tmp, bytes).map_err(|e| Error::file(&tmp, e.to_string()))?;
-    std::fs::rename(&tmp, path).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        Error::file(path, e.to_string())
-    })
-}
+pub use crate::fsio::write_atomic;
 
 /// Convenience: the covariance matrix of one joint annotation (raw code).
 pub fn joint_covariance(joint: &JointAnnotation) -> Result<DMatrix<f64>> {
