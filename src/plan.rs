@@ -134,8 +134,9 @@ pub fn predict_and_optimize(
     ctl: &SolveControl,
 ) -> Result<PlanResponse> {
     let mut request = input.request;
-    let target = locate(model, robot, &input.target, &input.target_box)?;
-    let target = match target {
+    let located = locate(model, robot, &input.target, &input.target_box)?;
+    let depth_m = located.as_ref().map(|l| l.camera_depth_m);
+    let target = match located {
         Some(located) => {
             let report = goal_from_target(robot, located, input.goal_standoff_m)?;
             if request.goal.is_some() {
@@ -150,14 +151,6 @@ pub fn predict_and_optimize(
             });
             Some(report)
         }
-        None => None,
-    };
-    let depth_m = match &target {
-        Some(t) => t.depth_m.or(Some(
-            capture_camera(model, robot)?
-                .to_camera(&Point3::from(t.position))
-                .z,
-        )),
         None => None,
     };
     let prediction =
@@ -191,6 +184,9 @@ pub fn capture_camera(model: &Model, robot: &Robot) -> Result<Camera> {
 struct Located {
     position: [f64; 3],
     depth_m: Option<f64>,
+    /// Depth of the centre along the camera's optical axis: measured, or
+    /// that of the client's position (what a depth-conditioned model reads).
+    camera_depth_m: f64,
     source: TargetSource,
 }
 
@@ -201,6 +197,10 @@ fn locate(
     target: &TargetInput,
     target_box: &[f64; 4],
 ) -> Result<Option<Located>> {
+    if let TargetInput::None = target {
+        return Ok(None);
+    }
+    let camera = capture_camera(model, robot)?;
     match target {
         TargetInput::None => Ok(None),
         TargetInput::Position(p) => {
@@ -208,15 +208,16 @@ fn locate(
             Ok(Some(Located {
                 position: *p,
                 depth_m: None,
+                camera_depth_m: camera.to_camera(&Point3::from(*p)).z,
                 source: TargetSource::Client,
             }))
         }
         TargetInput::Depth(depth, field) => {
-            let camera = capture_camera(model, robot)?;
             let t = locate_target(depth, target_box, &camera, field)?;
             Ok(Some(Located {
                 position: t.position,
                 depth_m: Some(t.depth_m),
+                camera_depth_m: t.depth_m,
                 source: TargetSource::Depth,
             }))
         }
@@ -242,6 +243,7 @@ fn goal_from_target(robot: &Robot, target: Located, standoff: Option<f64>) -> Re
         position,
         depth_m,
         source,
+        ..
     } = target;
     let standoff = standoff.unwrap_or(DEFAULT_GOAL_STANDOFF_M);
     if !(standoff.is_finite() && (0.0..=MAX_GOAL_STANDOFF_M).contains(&standoff)) {

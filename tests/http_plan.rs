@@ -67,16 +67,7 @@ fn plan_with_the_shipped_model_over_http() {
     let c = client();
     let url = server.url("/v1/plan");
     let (jpeg, depth, record) = generated_target_with_depth();
-    let b64 = |b: &[u8]| base64::engine::general_purpose::STANDARD.encode(b);
-    let fields = json!({
-        "target_box": record.bbox,
-        "mask_applied": true,
-        "obstacles": record.scene.obstacles,
-        "clearance_m": CLEARANCE_M,
-    });
-    let mut body = fields.clone();
-    body["image_base64"] = json!(b64(&jpeg));
-    body["depth_base64"] = json!(b64(&depth));
+    let (fields, body) = depth_request(&jpeg, &depth, &record);
     let (s, answer) = post_json(&c, &url, body.to_string());
     assert_eq!(s, 200, "{answer}");
     assert_valid(&openapi(), "post", "/v1/plan", s, &answer);
@@ -159,6 +150,25 @@ fn without_depth_or_target_no_goal_is_derived() {
     assert_eq!(without_times(again), without_times(answer));
 }
 
+fn b64(bytes: &[u8]) -> String {
+    base64::engine::general_purpose::STANDARD.encode(bytes)
+}
+
+/// The plan fields of a generated target (box, scene, clearance), and the
+/// whole JSON body with its image and depth as base64.
+fn depth_request(jpeg: &[u8], depth: &[u8], record: &TargetRecord) -> (Value, Value) {
+    let fields = json!({
+        "target_box": record.bbox,
+        "mask_applied": true,
+        "obstacles": record.scene.obstacles,
+        "clearance_m": CLEARANCE_M,
+    });
+    let mut body = fields.clone();
+    body["image_base64"] = json!(b64(jpeg));
+    body["depth_base64"] = json!(b64(depth));
+    (fields, body)
+}
+
 fn distance(a: &[f64], b: &[f64]) -> f64 {
     a.iter()
         .zip(b)
@@ -181,16 +191,7 @@ fn plan_with_depth_goes_to_the_berry_it_measured() {
     let c = client();
     let url = server.url("/v1/plan");
     let (jpeg, depth, record) = generated_target_with_depth();
-    let b64 = |b: &[u8]| base64::engine::general_purpose::STANDARD.encode(b);
-    let fields = json!({
-        "target_box": record.bbox,
-        "mask_applied": true,
-        "obstacles": record.scene.obstacles,
-        "clearance_m": CLEARANCE_M,
-    });
-    let mut body = fields.clone();
-    body["image_base64"] = json!(b64(&jpeg));
-    body["depth_base64"] = json!(b64(&depth));
+    let (fields, body) = depth_request(&jpeg, &depth, &record);
     let (s, answer) = post_json(&c, &url, body.to_string());
     assert_eq!(s, 200, "{answer}");
     assert_valid(&openapi(), "post", "/v1/plan", s, &answer);
@@ -256,7 +257,6 @@ fn bad_depth_inputs_are_422_naming_the_field() {
     let c = client();
     let url = server.url("/v1/plan");
     let (jpeg, depth, record) = generated_target_with_depth();
-    let b64 = |b: &[u8]| base64::engine::general_purpose::STANDARD.encode(b);
     let png16 = |w: u32, h: u32, value: u16| {
         let d = dpmp::perception::DepthImage::new(w, h, 0.001, vec![value; (w * h) as usize], "d");
         d.unwrap().encode_png().unwrap()
@@ -326,7 +326,6 @@ fn a_depth_conditioned_model_needs_depth() {
     let c = client();
     let url = server.url("/v1/plan");
     let (jpeg, depth, record) = generated_target_with_depth();
-    let b64 = |b: &[u8]| base64::engine::general_purpose::STANDARD.encode(b);
     let mut body = json!({
         "target_box": record.bbox,
         "mask_applied": true,
