@@ -28,7 +28,7 @@
 use crate::net::Model;
 use crate::optim::{optimize_with, Goal, OptimizeRequest, OptimizeResponse, SolveControl};
 use crate::perception::{locate_target, Camera, DepthImage};
-use crate::promp::{Basis, WeightDistribution};
+use crate::promp::{Basis, FinalPointObservation, WeightDistribution};
 use crate::robot::Robot;
 use crate::{Error, Result};
 use image::DynamicImage;
@@ -117,7 +117,8 @@ pub struct PlanResponse {
     /// The optimiser's answer for the predicted prior.
     #[serde(flatten)]
     pub result: OptimizeResponse,
-    /// The network's prior.
+    /// The prior the optimiser started from: the network's, conditioned on
+    /// the goal when a 3-D target was given ([`prior_towards_goal`]).
     pub prior: PriorTrajectory,
     /// Name of the model that predicted it.
     pub model: String,
@@ -155,9 +156,12 @@ pub fn predict_and_optimize(
     };
     let prediction =
         model.predict_with_depth(&input.image, input.target_box, input.mask_applied, depth_m)?;
-    let distribution = prediction.distribution;
     let basis = Basis::new(&request.promp).map_err(|e| e.within("promp"))?;
-    check_dimensions(&distribution, robot, &basis)?;
+    check_dimensions(&prediction.distribution, robot, &basis)?;
+    let distribution = match &target {
+        Some(report) => prior_towards_goal(&prediction.distribution, robot, &basis, report)?,
+        None => prediction.distribution,
+    };
     let prior = prior_trajectory(&distribution, &basis);
     request.prior = crate::optim::example::prior_spec(&distribution);
     let result = optimize_with(&request, robot, ctl)?;
@@ -167,6 +171,37 @@ pub fn predict_and_optimize(
         model: model.name().to_string(),
         target,
     })
+}
+
+/// Standard deviation of the goal observation the prior is conditioned on
+/// (m): well inside the optimiser's goal tolerance, loose enough that the
+/// update stays a small, well-conditioned correction.
+pub const GOAL_PRIOR_STD_M: f64 = 0.001;
+
+/// The network's prior conditioned on its final TCP reaching the goal
+/// ([`WeightDistribution::condition_final_point`]): the network keeps the
+/// posture and timing it learnt from the demonstrations, the kinematics
+/// move the hand to the 3-D target, and the optimiser starts next to the
+/// goal instead of pulling the whole trajectory there.
+pub fn prior_towards_goal(
+    prior: &WeightDistribution,
+    robot: &Robot,
+    basis: &Basis,
+    target: &TargetReport,
+) -> Result<WeightDistribution> {
+    let kinematics = |q: &[f64]| {
+        let position = robot.tcp_pose(q).translation.vector;
+        let jacobian = robot.tcp_jacobian(q);
+        let rows = jacobian.fixed_rows::<3>(0);
+        (
+            position,
+            DMatrix::from_fn(3, rows.ncols(), |r, c| rows[(r, c)]),
+        )
+    };
+    let observation = FinalPointObservation::new(Vector3::from(target.goal), GOAL_PRIOR_STD_M);
+    Ok(prior
+        .condition_final_point(basis, &observation, &kinematics)?
+        .distribution)
 }
 
 /// The camera that took the image: the model's camera model posed at the

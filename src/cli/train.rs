@@ -47,6 +47,13 @@ pub struct TrainArgs {
     /// KL weight of tp1 for VAE / cVAE.
     #[arg(long)]
     pub kl_weight: Option<f64>,
+    /// Weight of the task-space loss term (1 cm of final TCP error costs
+    /// 1); 0 (default) trains on the joint-space losses alone.
+    #[arg(long)]
+    pub tcp_weight: Option<f64>,
+    /// Dropout rate on the latent while the heads train (0 = off).
+    #[arg(long)]
+    pub latent_dropout: Option<f64>,
     /// Epochs without validation improvement before a phase stops.
     #[arg(long)]
     pub patience: Option<usize>,
@@ -75,6 +82,8 @@ impl TrainArgs {
         s.lr = self.lr.unwrap_or(s.lr);
         s.alpha = self.alpha.unwrap_or(s.alpha);
         s.kl_weight = self.kl_weight.unwrap_or(s.kl_weight);
+        s.tcp_weight = self.tcp_weight.unwrap_or(s.tcp_weight);
+        s.latent_dropout = self.latent_dropout.unwrap_or(s.latent_dropout);
         s.patience = self.patience.unwrap_or(s.patience);
         s.shape.latent_dim = self.latent_dim.unwrap_or(s.shape.latent_dim);
         s.resume = self.resume;

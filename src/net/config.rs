@@ -144,6 +144,13 @@ pub struct TrainingSummary {
     pub alpha: f64,
     /// Weight of the KL term in tp1 (variational encoders).
     pub kl_weight: f64,
+    /// Weight of the task-space (final TCP) term in tp2, tp3 and Direct
+    /// (0 in models trained before the term existed).
+    #[serde(default)]
+    pub tcp_weight: f64,
+    /// Dropout rate on the latent the heads read, in training only.
+    #[serde(default)]
+    pub latent_dropout: f64,
     /// Wall-clock training time in seconds.
     pub seconds: f64,
 }

@@ -14,6 +14,8 @@
 //! - [`distribution`] — [`WeightDistribution`]: from demonstrations,
 //!   trajectory mean / covariance / per-time marginals, sampling.
 //! - [`condition`] — Gaussian conditioning on via-points.
+//! - [`task_condition`] — conditioning on where the final configuration
+//!   puts a point (the TCP at a goal), through the kinematics.
 //! - [`codec`] — the paper's `n(n+1)/2`-number LDLᵀ covariance code.
 //! - [`annotation`] — the paper's per-joint annotation files.
 //! - [`psd`] — symmetric positive semi-definite repair and factorisation.
@@ -27,6 +29,7 @@ pub mod distribution;
 pub mod example;
 pub mod fit;
 pub mod psd;
+pub mod task_condition;
 
 pub use annotation::Prior;
 pub use basis::Basis;
@@ -35,3 +38,4 @@ pub use config::PrompConfig;
 pub use distribution::WeightDistribution;
 pub use fit::{fit_weights, trajectory_from_weights, velocities_from_weights};
 pub use psd::repair_covariance;
+pub use task_condition::{FinalPointObservation, TaskConditioned};

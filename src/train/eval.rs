@@ -336,11 +336,13 @@ pub fn to_markdown(report: &EvalReport) -> String {
         s += &format!(
             "## Depth-aware planning ({} targets)\n\n| figure | value |\n|---|---|\n\
              | back-projected berry centre error, median / p95 | {:.1} / {:.1} mm |\n\
+             | goal-conditioned prior final TCP vs demonstrations' mean, mean | {:.1} mm |\n\
              | plan final TCP vs demonstrations' mean, mean / p95 | {:.1} / {:.1} mm |\n\
              | plans verified optimal | {:.1} % |\n\n",
             p.plan_targets,
             p.target_position_error_m * 1e3,
             p.target_position_p95_error_m * 1e3,
+            p.plan_prior_mean_final_position_error_m * 1e3,
             p.plan_mean_final_position_error_m * 1e3,
             p.plan_p95_final_position_error_m * 1e3,
             p.plan_optimal_fraction * 100.0

@@ -14,6 +14,7 @@ pub mod losses;
 pub mod norm;
 pub mod phases;
 pub mod plan_eval;
+pub mod tcp_loss;
 pub mod trainer;
 
 pub use trainer::{train, ShapeSettings, TrainOutcome, TrainSettings};

@@ -9,6 +9,7 @@
 
 use super::data::{make_batch, target_tensors, Sample};
 use super::losses::TrajectoryOperator;
+use super::tcp_loss::TcpLoss;
 use crate::net::{candle_error, Network, ParamGroup};
 use crate::Result;
 use candle_core::{Device, Tensor};
@@ -68,6 +69,11 @@ pub struct LossWeights {
     pub alpha: f64,
     /// KL weight in tp1 (variational encoders).
     pub kl_weight: f64,
+    /// Weight of the task-space term ([`super::tcp_loss`]).
+    pub tcp_weight: f64,
+    /// Dropout rate on the latent the heads read (training batches of tp2
+    /// and Direct only).
+    pub latent_dropout: f64,
 }
 
 /// Encoder outputs cached for tp2 (the encoder is frozen there).
@@ -83,6 +89,8 @@ pub struct PhaseContext<'a> {
     pub network: &'a Network,
     /// The trajectory-loss operator of the model's basis.
     pub op: &'a TrajectoryOperator,
+    /// The task-space term, when its weight is positive.
+    pub tcp: Option<&'a TcpLoss>,
     /// Loss weights.
     pub weights: LossWeights,
     /// Training samples.
@@ -191,9 +199,13 @@ impl<'a> PhaseContext<'a> {
         train: bool,
     ) -> Result<Tensor> {
         let net = self.network;
+        let mut rng = rng;
         let batch = make_batch(samples, indices, net.config(), self.device())?;
         let enc = net.encode(&batch.images, train).map_err(candle_error)?;
-        let z = sample_latent(&enc.mu, enc.logvar.as_ref(), rng)?;
+        let mut z = sample_latent(&enc.mu, enc.logvar.as_ref(), rng.as_deref_mut())?;
+        if phase == Phase::Direct {
+            z = drop_latent(&z, self.weights.latent_dropout, rng)?;
+        }
         let features = net.features(&z, &batch.conditions).map_err(candle_error)?;
         let w = self.weights;
         let loss = match phase {
@@ -211,18 +223,37 @@ impl<'a> PhaseContext<'a> {
             }
             Phase::Tp3 => {
                 let out = net.heads(&features).map_err(candle_error)?;
-                self.op
+                let eq8 = self
+                    .op
                     .final_step_loss(&out, &batch.mean, &batch.cov, w.alpha)
-                    .map(|l| l.total)
+                    .map(|l| l.total);
+                eq8.and_then(|l| self.with_tcp_term(l, &out, &batch.mean))
             }
             Phase::Direct | Phase::Tp2 => {
                 let out = net.heads(&features).map_err(candle_error)?;
-                self.op
+                let eq7 = self
+                    .op
                     .trajectory_loss(&out, &batch.mean, &batch.cov, w.alpha)
-                    .map(|l| l.total)
+                    .map(|l| l.total);
+                eq7.and_then(|l| self.with_tcp_term(l, &out, &batch.mean))
             }
         };
         loss.map_err(candle_error)
+    }
+
+    /// `loss + tcp_weight * TCP term` when the task-space term is on.
+    fn with_tcp_term(
+        &self,
+        loss: Tensor,
+        out: &crate::net::heads::HeadOutput,
+        target_mean: &Tensor,
+    ) -> candle_core::Result<Tensor> {
+        match self.tcp {
+            Some(tcp) if self.weights.tcp_weight > 0.0 => {
+                loss + (tcp.loss(&out.mean, target_mean)? * self.weights.tcp_weight)?
+            }
+            _ => Ok(loss),
+        }
     }
 
     fn heads_loss(
@@ -248,14 +279,16 @@ impl<'a> PhaseContext<'a> {
             Some(lv) => Some(lv.index_select(&idx, 0).map_err(candle_error)?),
             None => None,
         };
-        let z = sample_latent(&mu, logvar.as_ref(), rng)?;
+        let mut rng = rng;
+        let z = sample_latent(&mu, logvar.as_ref(), rng.as_deref_mut())?;
+        let z = drop_latent(&z, self.weights.latent_dropout, rng)?;
         let conditions = condition_tensor(samples, indices, net.config(), self.device())?;
         let features = net.features(&z, &conditions).map_err(candle_error)?;
         let out = net.heads(&features).map_err(candle_error)?;
         let (mean, cov) = target_tensors(samples, indices, net.config(), self.device())?;
         self.op
             .trajectory_loss(&out, &mean, &cov, self.weights.alpha)
-            .map(|l| l.total)
+            .and_then(|l| self.with_tcp_term(l.total, &out, &mean))
             .map_err(candle_error)
     }
 }
@@ -275,6 +308,22 @@ fn condition_tensor(
         );
     }
     Tensor::from_vec(values, (indices.len(), config.condition_dim()), device).map_err(candle_error)
+}
+
+/// Inverted dropout on whole latent coordinates: each entry is zeroed with
+/// probability `rate` (drawn from `rng`) and the rest scaled by
+/// `1 / (1 - rate)`; the latent unchanged without an rng (evaluation) or
+/// at rate 0.
+pub fn drop_latent(z: &Tensor, rate: f64, rng: Option<&mut ChaCha8Rng>) -> Result<Tensor> {
+    let Some(rng) = rng.filter(|_| rate > 0.0) else {
+        return Ok(z.clone());
+    };
+    let keep = (1.0 / (1.0 - rate)) as f32;
+    let mask: Vec<f32> = (0..z.elem_count())
+        .map(|_| if rng.gen_bool(rate) { 0.0 } else { keep })
+        .collect();
+    let mask = Tensor::from_vec(mask, z.dims(), z.device()).map_err(candle_error)?;
+    (z * mask).map_err(candle_error)
 }
 
 /// Reparameterisation: `mu + exp(logvar / 2) * eps` with `eps ~ N(0, I)`

@@ -7,7 +7,10 @@
 //!   (`target_position_error_m`, the median; and the 95th percentile);
 //! - the plan's final TCP against the demonstrations' mean final TCP
 //!   (`plan_mean_final_position_error_m`, `plan_p95_…`), the same reference
-//!   as the network's `mean_final_position_error_m`.
+//!   as the network's `mean_final_position_error_m`;
+//! - the final TCP of the prior the optimiser starts from (the network's
+//!   prior conditioned on the goal, [`crate::plan::prior_towards_goal`])
+//!   against the same reference (`plan_prior_mean_final_position_error_m`).
 //!
 //! Targets are planned in parallel; each is independent, so the figures do
 //! not depend on the thread count.
@@ -37,6 +40,9 @@ pub struct PlanEval {
     pub plan_mean_final_position_error_m: f64,
     /// Its 95th percentile (m).
     pub plan_p95_final_position_error_m: f64,
+    /// Mean distance (m) of the goal-conditioned prior's final TCP to the
+    /// demonstrations' mean final TCP.
+    pub plan_prior_mean_final_position_error_m: f64,
     /// Fraction of plans verified `optimal`.
     pub plan_optimal_fraction: f64,
     /// Median distance (m) of the back-projected berry centre to the true one.
@@ -48,6 +54,7 @@ pub struct PlanEval {
 /// One target's outcome.
 struct Outcome {
     final_error: f64,
+    prior_error: f64,
     target_error: f64,
     optimal: bool,
 }
@@ -81,6 +88,8 @@ pub fn evaluate_plans(
         plan_targets: outcomes.len(),
         plan_mean_final_position_error_m: finals.iter().sum::<f64>() / n,
         plan_p95_final_position_error_m: percentile(&mut finals, 0.95),
+        plan_prior_mean_final_position_error_m: outcomes.iter().map(|o| o.prior_error).sum::<f64>()
+            / n,
         plan_optimal_fraction: outcomes.iter().filter(|o| o.optimal).count() as f64 / n,
         target_position_error_m: percentile(&mut targets, 0.5),
         target_position_p95_error_m: percentile(&mut targets, 0.95),
@@ -122,14 +131,21 @@ fn plan_one(
         .points
         .last()
         .ok_or_else(|| Error::Numerical(format!("{}: empty trajectory", entry.id)))?;
-    let tcp = robot.tcp_pose(&last.positions).translation.vector;
-    let final_error = (tcp - Vector3::from(record.final_tcp.position)).norm();
+    let reference = Vector3::from(record.final_tcp.position);
+    let final_error = (robot.tcp_pose(&last.positions).translation.vector - reference).norm();
+    let prior_last = answer
+        .prior
+        .mean
+        .last()
+        .ok_or_else(|| Error::Numerical(format!("{}: empty prior", entry.id)))?;
+    let prior_error = (robot.tcp_pose(prior_last).translation.vector - reference).norm();
     let located = answer
         .target
         .map(|t| Vector3::from(t.position))
         .ok_or_else(|| Error::Numerical(format!("{}: no target located", entry.id)))?;
     Ok(Outcome {
         final_error,
+        prior_error,
         target_error: (located - Vector3::from(record.target_position)).norm(),
         optimal: answer.result.status == Status::Optimal,
     })

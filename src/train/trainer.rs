@@ -10,6 +10,7 @@ use super::log::{plot_loss_curves, EpochRecord, MetricsLog};
 use super::losses::TrajectoryOperator;
 use super::norm::output_norm;
 use super::phases::{LossWeights, Phase, PhaseContext, Split};
+use super::tcp_loss::TcpLoss;
 use crate::net::checkpoint::{self, read_tensors, write_atomic, write_tensors};
 use crate::net::config::{DatasetInfo, TrainingSummary};
 use crate::net::{candle_error, Arch, ModelConfig, Network};
@@ -82,6 +83,13 @@ pub struct TrainSettings {
     pub alpha: f64,
     /// KL weight of tp1 for variational encoders.
     pub kl_weight: f64,
+    /// Weight of the task-space term (see [`super::tcp_loss`]) in the
+    /// phases that train the heads or tune the latent; 0 leaves it out.
+    pub tcp_weight: f64,
+    /// Dropout rate on the latent features while the heads train (tp2,
+    /// Direct), so they cannot lean on a few latent coordinates of each
+    /// training plant; 0 turns it off.
+    pub latent_dropout: f64,
     /// Epochs without validation improvement before a phase stops.
     pub patience: usize,
     /// Continue from `out/train_state` if present.
@@ -113,6 +121,8 @@ impl TrainSettings {
             lr_final_ratio: 0.1,
             alpha: 1.0,
             kl_weight: 1e-3,
+            tcp_weight: 0.0,
+            latent_dropout: 0.0,
             patience: 10,
             resume: false,
             progress: true,
@@ -131,13 +141,23 @@ impl TrainSettings {
                 return Err(Error::invalid(name, format!("must be in (0, 1], got {v}")));
             }
         }
-        for (name, v) in [("alpha", self.alpha), ("kl_weight", self.kl_weight)] {
+        for (name, v) in [
+            ("alpha", self.alpha),
+            ("kl_weight", self.kl_weight),
+            ("tcp_weight", self.tcp_weight),
+        ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(Error::invalid(
                     name,
                     format!("must be finite and >= 0, got {v}"),
                 ));
             }
+        }
+        if !(self.latent_dropout.is_finite() && (0.0..1.0).contains(&self.latent_dropout)) {
+            return Err(Error::invalid(
+                "latent_dropout",
+                format!("must be in [0, 1), got {}", self.latent_dropout),
+            ));
         }
         if self.patience == 0 {
             return Err(Error::invalid("patience", "must be at least 1"));
@@ -179,13 +199,15 @@ impl TrainSettings {
     /// tp1 and tp2 are exactly those of the run with latent tuning).
     fn fingerprint(&self, manifest_sha256: &str) -> String {
         format!(
-            "{}|{}|{}|{}|{}|{}|{}|{:?}|{}",
+            "{}|{}|{}|{}|{}|{}|{}|{}|{}|{:?}|{}",
             self.arch.as_str(),
             self.seed,
             self.batch,
             self.lr,
             self.alpha,
             self.kl_weight,
+            self.tcp_weight,
+            self.latent_dropout,
             self.lr_final_ratio,
             self.shape,
             manifest_sha256
@@ -237,6 +259,13 @@ mod infinity_as_null {
     }
 }
 
+/// The loss operators of a run.
+#[derive(Clone, Copy)]
+struct Losses<'a> {
+    op: &'a TrajectoryOperator,
+    tcp: Option<&'a TcpLoss>,
+}
+
 /// Train a model as the settings say; the best weights end in `settings.out`.
 pub fn train(settings: &TrainSettings) -> Result<TrainOutcome> {
     settings.validate()?;
@@ -250,10 +279,20 @@ pub fn train(settings: &TrainSettings) -> Result<TrainOutcome> {
     let network = Network::new(config, settings.seed, &device).map_err(candle_error)?;
     let basis = Basis::new(&network.config().promp)?;
     let op = TrajectoryOperator::new(&basis, &device).map_err(candle_error)?;
+    let tcp = if settings.tcp_weight > 0.0 {
+        let robot = crate::robot::Robot::panda()?;
+        Some(TcpLoss::new(&robot, &basis, &device).map_err(candle_error)?)
+    } else {
+        None
+    };
+    let losses = Losses {
+        op: &op,
+        tcp: tcp.as_ref(),
+    };
     let mut run = Run::start(settings, &network, &train_set.manifest_sha256)?;
     let phases = settings.phases();
     for (index, &phase) in phases.iter().enumerate().skip(run.state.phase_index) {
-        if !run.phase(index, phase, &op, &train_set, &val_set)? {
+        if !run.phase(index, phase, losses, &train_set, &val_set)? {
             break;
         }
     }
@@ -393,7 +432,7 @@ impl<'a> Run<'a> {
         &mut self,
         index: usize,
         phase: Phase,
-        op: &TrajectoryOperator,
+        losses: Losses,
         train: &Dataset,
         val: &Dataset,
     ) -> Result<bool> {
@@ -409,10 +448,13 @@ impl<'a> Run<'a> {
         };
         let ctx = PhaseContext {
             network: net,
-            op,
+            op: losses.op,
+            tcp: losses.tcp,
             weights: LossWeights {
                 alpha: s.alpha,
                 kl_weight: s.kl_weight,
+                tcp_weight: s.tcp_weight,
+                latent_dropout: s.latent_dropout,
             },
             train: &train.samples,
             val: &val.samples,
@@ -547,6 +589,8 @@ impl<'a> Run<'a> {
             lr: self.settings.lr,
             alpha: self.settings.alpha,
             kl_weight: self.settings.kl_weight,
+            tcp_weight: self.settings.tcp_weight,
+            latent_dropout: self.settings.latent_dropout,
             seconds: self.seconds(),
         }
     }
