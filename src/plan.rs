@@ -28,7 +28,7 @@
 use crate::net::Model;
 use crate::optim::{optimize_with, Goal, OptimizeRequest, OptimizeResponse, SolveControl};
 use crate::perception::{locate_target, Camera, DepthImage};
-use crate::promp::{Basis, FinalPointObservation, ViaPoint, WeightDistribution};
+use crate::promp::{Basis, FinalPointObservation, WeightDistribution};
 use crate::robot::Robot;
 use crate::{Error, Result};
 use image::DynamicImage;
@@ -159,13 +159,7 @@ pub fn predict_and_optimize(
     let basis = Basis::new(&request.promp).map_err(|e| e.within("promp"))?;
     check_dimensions(&prediction.distribution, robot, &basis)?;
     let distribution = match &target {
-        Some(report) => prior_towards_goal(
-            &prediction.distribution,
-            robot,
-            &basis,
-            report,
-            request.start.as_deref(),
-        )?,
+        Some(report) => prior_towards_goal(&prediction.distribution, robot, &basis, report)?,
         None => prediction.distribution,
     };
     let prior = prior_trajectory(&distribution, &basis);
@@ -184,38 +178,17 @@ pub fn predict_and_optimize(
 /// update stays a small, well-conditioned correction.
 pub const GOAL_PRIOR_STD_M: f64 = 0.001;
 
-/// Variance (rad²) of the start observation the prior is conditioned on
-/// (0.1 mrad standard deviation, the order of the joint encoders' resolution).
-pub const START_PRIOR_VAR_RAD2: f64 = 1e-8;
-
-/// The network's prior conditioned on the robot's start configuration
-/// (when the request has one; [`WeightDistribution::condition`] at phase
-/// 0) and on its final TCP reaching the goal
+/// The network's prior conditioned on its final TCP reaching the goal
 /// ([`WeightDistribution::condition_final_point`]): the network keeps the
-/// posture and timing it learnt from the demonstrations, the robot's state
-/// and the kinematics pin both ends, and the optimiser starts next to the
+/// posture and timing it learnt from the demonstrations, the kinematics
+/// move the hand to the 3-D target, and the optimiser starts next to the
 /// goal instead of pulling the whole trajectory there.
 pub fn prior_towards_goal(
     prior: &WeightDistribution,
     robot: &Robot,
     basis: &Basis,
     target: &TargetReport,
-    start: Option<&[f64]>,
 ) -> Result<WeightDistribution> {
-    let prior = match start {
-        Some(q) => {
-            robot.validate_configuration("start", q)?;
-            prior.condition(
-                basis,
-                &[ViaPoint {
-                    phase: 0.0,
-                    q: q.to_vec(),
-                    noise_var: START_PRIOR_VAR_RAD2,
-                }],
-            )?
-        }
-        None => prior.clone(),
-    };
     let kinematics = |q: &[f64]| {
         let position = robot.tcp_pose(q).translation.vector;
         let jacobian = robot.tcp_jacobian(q);
@@ -357,59 +330,4 @@ fn prior_trajectory(d: &WeightDistribution, basis: &Basis) -> PriorTrajectory {
 
 fn rows(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
     m.row_iter().map(|r| r.iter().copied().collect()).collect()
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::promp::example::example_distribution;
-    use crate::promp::PrompConfig;
-
-    fn goal_report(goal: Vector3<f64>) -> TargetReport {
-        TargetReport {
-            position: (goal + Vector3::new(0.1, 0.0, 0.0)).into(),
-            depth_m: None,
-            source: TargetSource::Client,
-            goal: goal.into(),
-            goal_tolerance_m: 0.005,
-        }
-    }
-
-    #[test]
-    fn the_conditioned_prior_starts_at_the_start_and_ends_at_the_goal() {
-        let robot = Robot::panda().unwrap();
-        let basis = Basis::new(&PrompConfig::default()).unwrap();
-        let prior = example_distribution(&basis, 20, 3).unwrap();
-        let mean = prior.trajectory_mean(&basis);
-        let last: Vec<f64> = mean.row(mean.nrows() - 1).iter().copied().collect();
-        // A goal 4 cm from where the prior's mean ends, a start 0.05 rad
-        // from where it begins: both pinned by the Panda's real kinematics.
-        let goal = robot.tcp_pose(&last).translation.vector + Vector3::new(0.02, -0.03, 0.015);
-        let start: Vec<f64> = mean.row(0).iter().map(|q| q + 0.05).collect();
-        let posterior =
-            prior_towards_goal(&prior, &robot, &basis, &goal_report(goal), Some(&start)).unwrap();
-        let m = posterior.trajectory_mean(&basis);
-        let end: Vec<f64> = m.row(m.nrows() - 1).iter().copied().collect();
-        let reached = (robot.tcp_pose(&end).translation.vector - goal).norm();
-        assert!(reached < 2e-3, "final TCP {reached} m from the goal");
-        for (q, s) in m.row(0).iter().zip(&start) {
-            assert!((q - s).abs() < 1e-3, "start {q} vs {s}");
-        }
-        // Conditioning only removes uncertainty.
-        let shrink = (&prior.cov - &posterior.cov).symmetric_eigenvalues().min();
-        assert!(shrink > -1e-9, "{shrink}");
-    }
-
-    #[test]
-    fn a_malformed_start_is_named() {
-        let robot = Robot::panda().unwrap();
-        let basis = Basis::new(&PrompConfig::default()).unwrap();
-        let prior = example_distribution(&basis, 20, 3).unwrap();
-        let report = goal_report(Vector3::new(0.5, 0.0, 0.5));
-        let err = prior_towards_goal(&prior, &robot, &basis, &report, Some(&[0.0; 6])).unwrap_err();
-        assert_eq!(err.field(), Some("start"));
-        let nan = [0.0, 0.0, f64::NAN, 0.0, 0.0, 0.0, 0.0];
-        let err = prior_towards_goal(&prior, &robot, &basis, &report, Some(&nan)).unwrap_err();
-        assert_eq!(err.field(), Some("start[2]"));
-    }
 }
