@@ -331,3 +331,41 @@ fn prior_trajectory(d: &WeightDistribution, basis: &Basis) -> PriorTrajectory {
 fn rows(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
     m.row_iter().map(|r| r.iter().copied().collect()).collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::promp::example::example_distribution;
+    use crate::promp::PrompConfig;
+
+    #[test]
+    fn the_conditioned_prior_ends_at_the_goal_with_the_real_kinematics() {
+        let robot = Robot::panda().unwrap();
+        let basis = Basis::new(&PrompConfig::default()).unwrap();
+        let prior = example_distribution(&basis, 20, 3).unwrap();
+        let mean = prior.trajectory_mean(&basis);
+        let last: Vec<f64> = mean.row(mean.nrows() - 1).iter().copied().collect();
+        // A goal 4 cm from where the prior's mean ends, through the Panda's
+        // real kinematics.
+        let goal = robot.tcp_pose(&last).translation.vector + Vector3::new(0.02, -0.03, 0.015);
+        let report = TargetReport {
+            position: (goal + Vector3::new(0.1, 0.0, 0.0)).into(),
+            depth_m: None,
+            source: TargetSource::Client,
+            goal: goal.into(),
+            goal_tolerance_m: 0.005,
+        };
+        let posterior = prior_towards_goal(&prior, &robot, &basis, &report).unwrap();
+        let m = posterior.trajectory_mean(&basis);
+        let end: Vec<f64> = m.row(m.nrows() - 1).iter().copied().collect();
+        let reached = (robot.tcp_pose(&end).translation.vector - goal).norm();
+        assert!(reached < 2e-3, "final TCP {reached} m from the goal");
+        // The start barely moves (the basis functions at the two ends
+        // hardly overlap) and conditioning only removes uncertainty.
+        for (a, b) in m.row(0).iter().zip(mean.row(0).iter()) {
+            assert!((a - b).abs() < 0.02, "start moved from {b} to {a}");
+        }
+        let shrink = (&prior.cov - &posterior.cov).symmetric_eigenvalues().min();
+        assert!(shrink > -1e-9, "{shrink}");
+    }
+}

@@ -342,3 +342,27 @@ pub fn sample_latent(
     let std = (lv * 0.5).and_then(|t| t.exp()).map_err(candle_error)?;
     (mu + (std * eps).map_err(candle_error)?).map_err(candle_error)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+
+    #[test]
+    fn latent_dropout_zeroes_about_its_rate_and_rescales_the_rest() {
+        let z = Tensor::ones((50, 40), candle_core::DType::F32, &Device::Cpu).unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(1);
+        let dropped = drop_latent(&z, 0.25, Some(&mut rng)).unwrap();
+        let values: Vec<f32> = dropped.flatten_all().unwrap().to_vec1().unwrap();
+        let zeros = values.iter().filter(|&&v| v == 0.0).count() as f64 / values.len() as f64;
+        assert!((zeros - 0.25).abs() < 0.04, "dropped fraction {zeros}");
+        assert!(values
+            .iter()
+            .all(|&v| v == 0.0 || (v - 1.0 / 0.75).abs() < 1e-6));
+        // Evaluation (no rng) and rate 0 leave the latent alone.
+        let same = drop_latent(&z, 0.25, None).unwrap();
+        assert_eq!(same.to_vec2::<f32>().unwrap(), z.to_vec2::<f32>().unwrap());
+        let same = drop_latent(&z, 0.0, Some(&mut rng)).unwrap();
+        assert_eq!(same.to_vec2::<f32>().unwrap(), z.to_vec2::<f32>().unwrap());
+    }
+}
