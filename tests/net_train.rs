@@ -47,27 +47,35 @@ fn tiny_model_overfits_four_samples() {
 }
 
 #[test]
-fn the_task_space_term_and_latent_dropout_train_and_are_recorded() {
+fn the_task_space_and_start_terms_and_latent_dropout_train_and_are_recorded() {
     // The tiny dataset's targets are 7-joint weights, so the Panda's
     // kinematics apply; the term adds (never removes) loss, and both
     // settings end up in the model's config.
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("data");
     net_common::write_dataset(&data, 2, 4, 32, 24, 1);
-    let run = |name: &str, tcp_weight: f64, latent_dropout: f64| {
+    let run = |name: &str, tcp_weight: f64, start_weight: f64, latent_dropout: f64| {
         let out = dir.path().join(name);
         let mut s = net_common::tiny_settings(&data, &out, Arch::Cvae);
         s.epochs_tp1 = 1;
         s.epochs_tp2 = 3;
         s.tcp_weight = tcp_weight;
+        s.start_weight = start_weight;
         s.latent_dropout = latent_dropout;
         let outcome = train(&s).unwrap();
         (outcome, records(&out))
     };
-    let (_, plain) = run("plain", 0.0, 0.0);
-    let (outcome, with_term) = run("tcp", 0.5, 0.25);
+    let (_, plain) = run("plain", 0.0, 0.0, 0.0);
+    let (outcome, with_term) = run("tcp", 0.5, 10.0, 0.25);
     let summary = &outcome.summary;
-    assert_eq!((summary.tcp_weight, summary.latent_dropout), (0.5, 0.25));
+    assert_eq!(
+        (
+            summary.tcp_weight,
+            summary.start_weight,
+            summary.latent_dropout
+        ),
+        (0.5, 10.0, 0.25)
+    );
     let tp2 = |r: &[EpochRecord]| r.iter().find(|e| e.phase == "tp2").unwrap().val_loss;
     assert!(tp2(&with_term).is_finite());
     assert!(
@@ -81,7 +89,14 @@ fn the_task_space_term_and_latent_dropout_train_and_are_recorded() {
         .config()
         .clone();
     let recorded = config.training.unwrap();
-    assert_eq!((recorded.tcp_weight, recorded.latent_dropout), (0.5, 0.25));
+    assert_eq!(
+        (
+            recorded.tcp_weight,
+            recorded.start_weight,
+            recorded.latent_dropout
+        ),
+        (0.5, 10.0, 0.25)
+    );
 }
 
 fn weights(out: &Path) -> Vec<(String, Vec<f32>)> {
@@ -229,4 +244,7 @@ fn bad_dataset_and_settings_give_clear_errors() {
     let mut s4 = s.clone();
     s4.tcp_weight = f64::NAN;
     assert_eq!(train(&s4).unwrap_err().field(), Some("tcp_weight"));
+    let mut s5 = s.clone();
+    s5.start_weight = -1.0;
+    assert_eq!(train(&s5).unwrap_err().field(), Some("start_weight"));
 }

@@ -51,6 +51,10 @@ pub struct TrainArgs {
     /// 1); 0 (default) trains on the joint-space losses alone.
     #[arg(long)]
     pub tcp_weight: Option<f64>,
+    /// Weight of the start term: per rad² of the mean's error at the
+    /// first phase sample (0, default, leaves it to Eq. 7).
+    #[arg(long)]
+    pub start_weight: Option<f64>,
     /// Dropout rate on the latent while the heads train (0 = off).
     #[arg(long)]
     pub latent_dropout: Option<f64>,
@@ -83,6 +87,7 @@ impl TrainArgs {
         s.alpha = self.alpha.unwrap_or(s.alpha);
         s.kl_weight = self.kl_weight.unwrap_or(s.kl_weight);
         s.tcp_weight = self.tcp_weight.unwrap_or(s.tcp_weight);
+        s.start_weight = self.start_weight.unwrap_or(s.start_weight);
         s.latent_dropout = self.latent_dropout.unwrap_or(s.latent_dropout);
         s.patience = self.patience.unwrap_or(s.patience);
         s.shape.latent_dim = self.latent_dim.unwrap_or(s.shape.latent_dim);

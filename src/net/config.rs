@@ -148,6 +148,9 @@ pub struct TrainingSummary {
     /// (0 in models trained before the term existed).
     #[serde(default)]
     pub tcp_weight: f64,
+    /// Weight of the start term (per rad²; 0 in older models).
+    #[serde(default)]
+    pub start_weight: f64,
     /// Dropout rate on the latent the heads read, in training only.
     #[serde(default)]
     pub latent_dropout: f64,

@@ -22,6 +22,7 @@ use candle_core::{Device, Result, Tensor};
 pub struct TrajectoryOperator {
     phi: Tensor,
     phi_t: Tensor,
+    first: Tensor,
     last: Tensor,
     decoder: CovarianceDecoder,
 }
@@ -49,8 +50,10 @@ impl TrajectoryOperator {
             }
         }
         let phi = Tensor::from_vec(rows, (t, n), device)?;
+        let first = phi.narrow(0, 0, 1)?.t()?.contiguous()?;
         let last = phi.narrow(0, t - 1, 1)?.t()?.contiguous()?;
         Ok(TrajectoryOperator {
+            first,
             phi_t: phi.t()?.contiguous()?,
             phi,
             last,
@@ -121,6 +124,23 @@ impl TrajectoryOperator {
     }
 }
 
+impl TrajectoryOperator {
+    /// The start term: squared error of the mean at the first phase
+    /// sample, summed over joints and averaged over the batch (rad²). Eq. 7
+    /// weighs the start like any other of the 150 samples; a prior whose
+    /// start is off from the robot's makes the optimiser bend the whole
+    /// motion (docs/experiments.md).
+    pub fn start_loss(&self, pred: &HeadOutput, target_mean: &Tensor) -> Result<Tensor> {
+        let (b, j, n) = target_mean.dims3()?;
+        let dm = (&pred.mean - target_mean)?.reshape((b * j, n))?;
+        dm.matmul(&self.first)?
+            .sqr()?
+            .reshape((b, j))?
+            .sum(1)?
+            .mean_all()
+    }
+}
+
 fn combine(mean: Tensor, cov: Tensor, alpha: f64) -> Result<JointLoss> {
     let total = (mean.sum_all()? + (cov.sum_all()? * alpha)?)?;
     Ok(JointLoss { total, mean, cov })
@@ -136,4 +156,43 @@ pub fn reconstruction_loss(reconstruction: &Tensor, images: &Tensor) -> Result<T
 pub fn kl_loss(mu: &Tensor, logvar: &Tensor) -> Result<Tensor> {
     let inner = ((logvar + 1.0)? - mu.sqr()?)?.sub(&logvar.exp()?)?;
     inner.mean_all()? * -0.5
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::promp::PrompConfig;
+
+    #[test]
+    fn the_start_term_is_the_squared_start_offset_summed_over_joints() {
+        // Constant weight offsets c_j shift a normalised basis' trajectory
+        // by c_j at every sample, the first included.
+        let basis = Basis::new(&PrompConfig::default()).unwrap();
+        let op = TrajectoryOperator::new(&basis, &Device::Cpu).unwrap();
+        let n = basis.n_basis();
+        let offsets = [0.1f32, -0.2, 0.05];
+        let target = Tensor::zeros((2, 3, n), candle_core::DType::F32, &Device::Cpu).unwrap();
+        let shifted: Vec<f32> = (0..2)
+            .flat_map(|_| offsets.iter().flat_map(|&c| vec![c; n]))
+            .collect();
+        let pred = HeadOutput {
+            mean: Tensor::from_vec(shifted, (2, 3, n), &Device::Cpu).unwrap(),
+            code: Tensor::zeros(
+                (2, 3, n * (n + 1) / 2),
+                candle_core::DType::F32,
+                &Device::Cpu,
+            )
+            .unwrap(),
+        };
+        let value = op
+            .start_loss(&pred, &target)
+            .unwrap()
+            .to_scalar::<f32>()
+            .unwrap();
+        let want: f32 = offsets.iter().map(|c| c * c).sum();
+        assert!(
+            (value - want).abs() < 1e-5 * want.max(1.0),
+            "{value} vs {want}"
+        );
+    }
 }

@@ -71,6 +71,8 @@ pub struct LossWeights {
     pub kl_weight: f64,
     /// Weight of the task-space term ([`super::tcp_loss`]).
     pub tcp_weight: f64,
+    /// Weight of the start term ([`TrajectoryOperator::start_loss`], per rad²).
+    pub start_weight: f64,
     /// Dropout rate on the latent the heads read (training batches of tp2
     /// and Direct only).
     pub latent_dropout: f64,
@@ -227,7 +229,7 @@ impl<'a> PhaseContext<'a> {
                     .op
                     .final_step_loss(&out, &batch.mean, &batch.cov, w.alpha)
                     .map(|l| l.total);
-                eq8.and_then(|l| self.with_tcp_term(l, &out, &batch.mean))
+                eq8.and_then(|l| self.with_extra_terms(l, &out, &batch.mean))
             }
             Phase::Direct | Phase::Tp2 => {
                 let out = net.heads(&features).map_err(candle_error)?;
@@ -235,24 +237,31 @@ impl<'a> PhaseContext<'a> {
                     .op
                     .trajectory_loss(&out, &batch.mean, &batch.cov, w.alpha)
                     .map(|l| l.total);
-                eq7.and_then(|l| self.with_tcp_term(l, &out, &batch.mean))
+                eq7.and_then(|l| self.with_extra_terms(l, &out, &batch.mean))
             }
         };
         loss.map_err(candle_error)
     }
 
-    /// `loss + tcp_weight * TCP term` when the task-space term is on.
-    fn with_tcp_term(
+    /// `loss + tcp_weight * TCP term + start_weight * start term`, each
+    /// when its weight is positive.
+    fn with_extra_terms(
         &self,
         loss: Tensor,
         out: &crate::net::heads::HeadOutput,
         target_mean: &Tensor,
     ) -> candle_core::Result<Tensor> {
-        match self.tcp {
-            Some(tcp) if self.weights.tcp_weight > 0.0 => {
-                loss + (tcp.loss(&out.mean, target_mean)? * self.weights.tcp_weight)?
+        let w = self.weights;
+        let loss = match self.tcp {
+            Some(tcp) if w.tcp_weight > 0.0 => {
+                (loss + (tcp.loss(&out.mean, target_mean)? * w.tcp_weight)?)?
             }
-            _ => Ok(loss),
+            _ => loss,
+        };
+        if w.start_weight > 0.0 {
+            loss + (self.op.start_loss(out, target_mean)? * w.start_weight)?
+        } else {
+            Ok(loss)
         }
     }
 
@@ -288,7 +297,7 @@ impl<'a> PhaseContext<'a> {
         let (mean, cov) = target_tensors(samples, indices, net.config(), self.device())?;
         self.op
             .trajectory_loss(&out, &mean, &cov, self.weights.alpha)
-            .and_then(|l| self.with_tcp_term(l.total, &out, &mean))
+            .and_then(|l| self.with_extra_terms(l.total, &out, &mean))
             .map_err(candle_error)
     }
 }

@@ -86,6 +86,9 @@ pub struct TrainSettings {
     /// Weight of the task-space term (see [`super::tcp_loss`]) in the
     /// phases that train the heads or tune the latent; 0 leaves it out.
     pub tcp_weight: f64,
+    /// Weight of the start term (per rad² of the mean's error at the first
+    /// phase sample) in the same phases; 0 leaves it out.
+    pub start_weight: f64,
     /// Dropout rate on the latent features while the heads train (tp2,
     /// Direct), so they cannot lean on a few latent coordinates of each
     /// training plant; 0 turns it off.
@@ -122,6 +125,7 @@ impl TrainSettings {
             alpha: 1.0,
             kl_weight: 1e-3,
             tcp_weight: 0.0,
+            start_weight: 0.0,
             latent_dropout: 0.0,
             patience: 10,
             resume: false,
@@ -145,6 +149,7 @@ impl TrainSettings {
             ("alpha", self.alpha),
             ("kl_weight", self.kl_weight),
             ("tcp_weight", self.tcp_weight),
+            ("start_weight", self.start_weight),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(Error::invalid(
@@ -199,7 +204,7 @@ impl TrainSettings {
     /// tp1 and tp2 are exactly those of the run with latent tuning).
     fn fingerprint(&self, manifest_sha256: &str) -> String {
         format!(
-            "{}|{}|{}|{}|{}|{}|{}|{}|{}|{:?}|{}",
+            "{}|{}|{}|{}|{}|{}|{}|{}|{}|{}|{:?}|{}",
             self.arch.as_str(),
             self.seed,
             self.batch,
@@ -207,6 +212,7 @@ impl TrainSettings {
             self.alpha,
             self.kl_weight,
             self.tcp_weight,
+            self.start_weight,
             self.latent_dropout,
             self.lr_final_ratio,
             self.shape,
@@ -454,6 +460,7 @@ impl<'a> Run<'a> {
                 alpha: s.alpha,
                 kl_weight: s.kl_weight,
                 tcp_weight: s.tcp_weight,
+                start_weight: s.start_weight,
                 latent_dropout: s.latent_dropout,
             },
             train: &train.samples,
@@ -590,6 +597,7 @@ impl<'a> Run<'a> {
             alpha: self.settings.alpha,
             kl_weight: self.settings.kl_weight,
             tcp_weight: self.settings.tcp_weight,
+            start_weight: self.settings.start_weight,
             latent_dropout: self.settings.latent_dropout,
             seconds: self.seconds(),
         }
