@@ -55,16 +55,7 @@ impl WeightDistribution {
         if via_points.is_empty() {
             return Ok(self.clone());
         }
-        if basis.n_basis() != self.n_basis {
-            return Err(Error::invalid(
-                "basis",
-                format!(
-                    "basis has {} functions, distribution {}",
-                    basis.n_basis(),
-                    self.n_basis
-                ),
-            ));
-        }
+        self.check_basis(basis)?;
         let nj = self.n_joints;
         let m = via_points.len() * nj;
         let mut h = DMatrix::zeros(m, self.dim());

@@ -23,6 +23,22 @@ pub struct WeightDistribution {
 }
 
 impl WeightDistribution {
+    /// An error naming `basis` unless it has this distribution's number of
+    /// basis functions.
+    pub fn check_basis(&self, basis: &Basis) -> Result<()> {
+        if basis.n_basis() != self.n_basis {
+            return Err(Error::invalid(
+                "basis",
+                format!(
+                    "basis has {} functions, distribution {}",
+                    basis.n_basis(),
+                    self.n_basis
+                ),
+            ));
+        }
+        Ok(())
+    }
+
     /// Check shapes, finiteness and symmetry (to a relative 1e-8).
     pub fn new(
         mean: DVector<f64>,

@@ -91,16 +91,7 @@ impl WeightDistribution {
         kinematics: PointKinematics,
     ) -> Result<TaskConditioned> {
         observation.validate()?;
-        if basis.n_basis() != self.n_basis {
-            return Err(Error::invalid(
-                "basis",
-                format!(
-                    "basis has {} functions, distribution {}",
-                    basis.n_basis(),
-                    self.n_basis
-                ),
-            ));
-        }
+        self.check_basis(basis)?;
         let problem = ModeProblem::new(self, basis, observation, kinematics)?;
         let mut estimate = self.mean.clone();
         let mut objective = problem.objective(&estimate);
