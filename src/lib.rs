@@ -32,6 +32,8 @@
 //!   the 3-D target position behind a box.
 //! - [`plan`] — the image (+ depth) → prior → goal → optimiser pipeline
 //!   behind `/v1/plan` and `dpmp plan`.
+//! - [`demos`] — recorded demonstrations in (CSV/JSON joint recordings →
+//!   phase-normalised weight fits → a prior).
 //! - [`synth`] — synthetic plant scenes, camera renderer, demonstrations.
 //! - [`net`] and [`train`] — the dPMP network in candle and its training.
 //! - [`service`] — the axum HTTP service.
@@ -48,6 +50,7 @@
 
 pub mod bench;
 pub mod cli;
+pub mod demos;
 pub mod error;
 pub mod fsio;
 pub mod net;

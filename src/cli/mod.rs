@@ -15,8 +15,11 @@ pub mod optimize;
 pub mod plan;
 pub mod prior;
 pub mod robot;
+pub mod robot_args;
 pub mod serve;
 pub mod train;
+
+pub use robot_args::RobotArgs;
 
 /// dPMP: learned ProMP priors and constrained trajectory optimisation for
 /// selective strawberry harvesting with a Franka Panda.
@@ -31,7 +34,7 @@ pub struct Cli {
 /// Top-level subcommands.
 #[derive(Debug, Subcommand)]
 pub enum Command {
-    /// Inspect and plot ProMP priors (the paper's annotation format).
+    /// Fit, inspect and plot ProMP priors (the paper's annotation format).
     #[command(subcommand)]
     Prior(prior::PriorCommand),
     /// Robot kinematics and clearance queries.
@@ -82,6 +85,18 @@ pub fn run(command: Command) -> crate::Result<()> {
         Command::Serve(a) => serve::run(a),
         Command::Bench(a) => bench::run(a),
     }
+}
+
+/// A progress bar on stderr for `len` steps of `what` (drawn only on a
+/// terminal).
+pub fn progress_bar(len: u64, what: &str) -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::new(len);
+    if let Ok(style) = indicatif::ProgressStyle::with_template(&format!(
+        "{{bar:40}} {{pos}}/{{len}} {what}  eta {{eta}}"
+    )) {
+        bar.set_style(style);
+    }
+    bar
 }
 
 /// Write `value` as pretty JSON to stdout.

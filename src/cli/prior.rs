@@ -1,5 +1,7 @@
-//! `dpmp prior`: inspect, plot and create priors in the paper's annotation format.
+//! `dpmp prior`: fit priors to recorded demonstrations; inspect, plot and
+//! create priors in the paper's annotation format.
 
+use crate::demos;
 use crate::promp::{annotation, example, Basis, Prior, PrompConfig};
 use crate::{Error, Result};
 use clap::{Args, Subcommand, ValueEnum};
@@ -10,6 +12,11 @@ use std::path::{Path, PathBuf};
 /// `dpmp prior` subcommands.
 #[derive(Debug, Subcommand)]
 pub enum PriorCommand {
+    /// Fit a prior to recorded demonstrations (CSV or JSON: a `time` column
+    /// in seconds and one column per joint, named as in the URDF). Writes
+    /// the annotation folder (J1..Jn/K.json), prior.json (an optimise
+    /// request with the prior) and fit.json (residual per demonstration).
+    Fit(FitArgs),
     /// Print the mean and per-time standard deviation of an annotated prior.
     Inspect(InspectArgs),
     /// Plot per-joint mean trajectories with ±2σ bands.
@@ -17,6 +24,35 @@ pub enum PriorCommand {
     /// Write an example prior (synthetic joint-space demonstrations shaped
     /// like the paper's) in the annotation format.
     Example(ExampleArgs),
+}
+
+/// Arguments of `dpmp prior fit`.
+#[derive(Debug, Args)]
+pub struct FitArgs {
+    /// Demonstration files, or directories of them (.csv, .json).
+    #[arg(long, num_args = 1.., required = true, value_name = "FILE|DIR")]
+    pub demos: Vec<PathBuf>,
+    /// Output folder.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Target index K of the annotation files.
+    #[arg(long, default_value_t = 0)]
+    pub index: usize,
+    /// The robot the demonstrations were recorded on.
+    #[command(flatten)]
+    pub robot: crate::cli::RobotArgs,
+    /// Basis functions per joint.
+    #[arg(long, default_value_t = 8)]
+    pub n_basis: usize,
+    /// Basis width h.
+    #[arg(long, default_value_t = 0.07)]
+    pub width: f64,
+    /// Phase samples T.
+    #[arg(long, default_value_t = 150)]
+    pub n_samples: usize,
+    /// Also plot the prior (mean ±2σ per joint) into this .png or .svg.
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
 }
 
 /// Where a prior comes from.
@@ -105,10 +141,61 @@ pub struct InspectReport {
 /// Run a `dpmp prior` subcommand.
 pub fn run(command: PriorCommand) -> Result<()> {
     match command {
+        PriorCommand::Fit(args) => fit(&args),
         PriorCommand::Inspect(args) => inspect(&args),
         PriorCommand::Plot(args) => plot(&args),
         PriorCommand::Example(args) => write_example(&args),
     }
+}
+
+fn fit(args: &FitArgs) -> Result<()> {
+    if let Some(plot) = &args.plot {
+        crate::plot::format_of(plot, "--plot")?;
+    }
+    let config = PrompConfig {
+        n_basis: args.n_basis,
+        width: args.width,
+        n_samples: args.n_samples,
+    };
+    let basis = Basis::new(&config).map_err(crate::cli::as_flag_error)?;
+    let robot = args.robot.load()?;
+    let paths = demos::demonstration_paths(&args.demos)?;
+    let progress = crate::cli::progress_bar(paths.len() as u64, "reading demonstrations");
+    let recordings = paths
+        .iter()
+        .map(|p| {
+            progress.inc(1);
+            demos::read_demonstration(p, robot.joint_names())
+        })
+        .collect::<Result<Vec<_>>>()?;
+    progress.finish_and_clear();
+    let fit = demos::fit_prior(&basis, &robot, &recordings)?;
+    let report = demos::write_prior(&args.out, args.index, &fit, &config, &robot)?;
+    if let Some(plot) = &args.plot {
+        let times: Vec<f64> = basis
+            .phases()
+            .iter()
+            .map(|z| z * report.duration_s)
+            .collect();
+        let series = crate::plot::JointSeries {
+            label: format!("prior of {} demonstrations, mean ± 2σ", fit.demos.len()),
+            color: plotters::style::RGBColor(200, 30, 30),
+            mean: fit.distribution.trajectory_mean(&basis),
+            std: Some(fit.distribution.trajectory_std(&basis, 0.0)),
+            sigmas: 2.0,
+        };
+        let limits: Vec<(f64, f64)> = robot.limits().iter().map(|l| (l.lower, l.upper)).collect();
+        let title = format!("ProMP prior fitted to {}", args.out.display());
+        crate::plot::joint_panels(
+            plot,
+            &title,
+            &times,
+            &[series],
+            robot.joint_names(),
+            Some(&limits),
+        )?;
+    }
+    crate::cli::print_json(&report)
 }
 
 fn load(source: &Source) -> Result<(Prior, Basis)> {

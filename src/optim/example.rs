@@ -48,13 +48,7 @@ impl Default for ExampleSettings {
 
 /// The prior as a full-covariance request field.
 pub fn prior_spec(dist: &WeightDistribution) -> PriorSpec {
-    let n = dist.dim();
-    PriorSpec::Full {
-        mean: dist.mean.as_slice().to_vec(),
-        cov: (0..n)
-            .map(|r| (0..n).map(|c| dist.cov[(r, c)]).collect())
-            .collect(),
-    }
+    PriorSpec::from(dist)
 }
 
 /// A typical optimise request, deterministic in `seed`.

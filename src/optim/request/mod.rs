@@ -84,6 +84,19 @@ pub enum PriorSpec {
     },
 }
 
+impl From<&crate::promp::WeightDistribution> for PriorSpec {
+    /// The full Gaussian of a weight distribution (joint-major).
+    fn from(dist: &crate::promp::WeightDistribution) -> Self {
+        let n = dist.dim();
+        PriorSpec::Full {
+            mean: dist.mean.as_slice().to_vec(),
+            cov: (0..n)
+                .map(|r| (0..n).map(|c| dist.cov[(r, c)]).collect())
+                .collect(),
+        }
+    }
+}
+
 /// Goal: TCP position at the end of the motion.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
