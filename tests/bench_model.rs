@@ -49,6 +49,7 @@ fn model_mode_runs_the_plan_pipeline_and_reports_final_tcp_error() {
         progress: false,
     };
     let report = run_model_suite(
+        &dpmp::robot::Robot::panda().unwrap(),
         ModelSource {
             model: &model_dir,
             data: &data,
@@ -113,6 +114,7 @@ fn model_mode_flags_are_checked() {
     let dir = tempfile::tempdir().unwrap();
     let no_model = dir.path().join("no-model");
     let e = run_model_suite(
+        &dpmp::robot::Robot::panda().unwrap(),
         ModelSource {
             model: &no_model,
             data: dir.path(),

@@ -48,6 +48,7 @@ fn smoke_run_of_five_problems_writes_a_consistent_report() {
         progress: false,
     };
     let report = run_suite(
+        &dpmp::robot::Robot::panda().unwrap(),
         problems_dir.path(),
         out.path(),
         methods(),

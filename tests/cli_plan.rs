@@ -264,3 +264,38 @@ fn eval_on_a_test_split_reports_the_condition_only_baseline() {
         .unwrap();
     assert!(error.is_finite() && error > 0.0, "{error}");
 }
+
+#[test]
+fn plan_refuses_a_model_for_another_robot_and_finds_the_model_through_the_environment() {
+    let dir = tempfile::tempdir().unwrap();
+    let (data, record) = one_plant(dir.path());
+    let args = plan_args(dir.path(), &data, &record);
+
+    // The shipped model was trained for the Panda to panda_tcp.
+    let urdf = Path::new(env!("CARGO_MANIFEST_DIR")).join("models/panda/panda.urdf");
+    let mut other = args.clone();
+    other.extend([
+        "--robot".into(),
+        urdf.display().to_string(),
+        "--tip".into(),
+        "panda_hand".into(),
+    ]);
+    let o = dpmp(&other.iter().map(String::as_str).collect::<Vec<_>>());
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("trained for another robot") && err.contains("panda_hand"),
+        "{err}"
+    );
+
+    // Without --model, DPMP_MODEL_DIR names the model folder.
+    let missing = dir.path().join("no-model-here");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_dpmp"))
+        .args(&args)
+        .env("DPMP_MODEL_DIR", &missing)
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("no-model-here"), "{err}");
+}

@@ -343,3 +343,21 @@ fn a_depth_conditioned_model_needs_depth() {
     let (s, answer) = post_json(&c, &url, body.to_string());
     assert_eq!(s, 200, "{answer}");
 }
+
+#[test]
+fn the_service_refuses_a_model_trained_for_another_robot() {
+    let mut config = dpmp::net::ModelConfig::new("hand-model", dpmp::net::Arch::Cvae);
+    let urdf = Path::new(env!("CARGO_MANIFEST_DIR")).join("models/panda/panda.urdf");
+    let hand = Robot::from_urdf_file(&urdf, "panda_link0", "panda_hand").unwrap();
+    config.robot = Some(hand.identity());
+    let network = dpmp::net::Network::new(config, 1, &candle_core::Device::Cpu).unwrap();
+    let model = Model::from_network(network);
+    let e = AppState::new(test_config(), Robot::panda().unwrap(), Some(model)).unwrap_err();
+    assert_eq!(e.field(), Some("robot"));
+    assert!(e.to_string().contains("hand-model"), "{e}");
+    // The model's own robot is accepted.
+    let mut config = dpmp::net::ModelConfig::new("hand-model", dpmp::net::Arch::Cvae);
+    config.robot = Some(hand.identity());
+    let network = dpmp::net::Network::new(config, 1, &candle_core::Device::Cpu).unwrap();
+    assert!(AppState::new(test_config(), hand, Some(Model::from_network(network))).is_ok());
+}

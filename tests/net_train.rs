@@ -88,6 +88,9 @@ fn the_task_space_and_start_terms_and_latent_dropout_train_and_are_recorded() {
         .unwrap()
         .config()
         .clone();
+    // The robot it was trained for is recorded.
+    let panda = dpmp::robot::Robot::panda().unwrap();
+    assert_eq!(config.robot, Some(panda.identity()));
     let recorded = config.training.unwrap();
     assert_eq!(
         (

@@ -29,6 +29,7 @@ use std::path::Path;
 /// Run `methods` on the first `limit` problems of `problems_dir` and write
 /// `report.json`, `report.md` and the plots into `out`.
 pub fn run_suite(
+    robot: &Robot,
     problems_dir: &Path,
     out: &Path,
     methods: Vec<Box<dyn Method>>,
@@ -40,7 +41,7 @@ pub fn run_suite(
     if let Some(n) = limit {
         problems.truncate(n);
     }
-    run_and_report(&problems, out, methods, settings, command)
+    run_and_report(robot, &problems, out, methods, settings, command)
 }
 
 /// Where model mode takes its targets and network from.
@@ -58,6 +59,7 @@ pub struct ModelSource<'a> {
 /// source's split (see [`model_suite`]); writes the same report files
 /// into `out`.
 pub fn run_model_suite(
+    robot: &Robot,
     source: ModelSource,
     out: &Path,
     methods: Vec<Box<dyn Method>>,
@@ -66,12 +68,14 @@ pub fn run_model_suite(
     command: &str,
 ) -> Result<Report> {
     let model = crate::net::Model::load(source.model)?;
+    model.config().check_robot(robot)?;
     let problems = model_suite::model_problems(&model, source.data, source.split, limit)?;
-    run_and_report(&problems, out, methods, settings, command)
+    run_and_report(robot, &problems, out, methods, settings, command)
 }
 
 /// Run `methods` on `problems` and write the report and plots into `out`.
 pub fn run_and_report(
+    robot: &Robot,
     problems: &[(String, Result<ProblemFile>)],
     out: &Path,
     methods: Vec<Box<dyn Method>>,
@@ -79,8 +83,7 @@ pub fn run_and_report(
     command: &str,
 ) -> Result<Report> {
     std::fs::create_dir_all(out).map_err(|e| Error::file(out, e.to_string()))?;
-    let robot = Robot::panda()?;
-    let records = run_benchmark(problems, &methods, &robot, settings)?;
+    let records = run_benchmark(problems, &methods, robot, settings)?;
     let names: Vec<String> = methods.iter().map(|m| m.name()).collect();
     let report = Report::new(command, &names, records);
     report.write(out)?;

@@ -7,7 +7,6 @@
 //! - `dpmp bench label-typical --out problems/typical/labels.json [--count N] [--restarts R]`
 
 use crate::bench::{self, method_from_name, MakeSettings, RunSettings, DEFAULT_METHODS};
-use crate::robot::Robot;
 use crate::{Error, Result};
 use std::path::PathBuf;
 
@@ -45,6 +44,9 @@ pub struct BenchArgs {
     /// Model mode: dataset split (train, val, test or all).
     #[arg(long, default_value = "test")]
     pub split: String,
+    /// The robot (in model mode, the one the model was trained for).
+    #[command(flatten)]
+    pub robot: super::RobotArgs,
 }
 
 /// `dpmp bench` subcommands.
@@ -68,6 +70,9 @@ pub struct LabelArgs {
     /// Restarts per solve (the long search; at most 32).
     #[arg(long, default_value_t = 32)]
     pub restarts: usize,
+    /// The robot.
+    #[command(flatten)]
+    pub robot: super::RobotArgs,
 }
 
 /// Arguments of `dpmp bench make-problems`.
@@ -82,6 +87,9 @@ pub struct MakeArgs {
     /// Problems per category (7 categories).
     #[arg(long, default_value_t = 9)]
     pub per_category: usize,
+    /// The robot.
+    #[command(flatten)]
+    pub robot: super::RobotArgs,
 }
 
 /// Run `dpmp bench`.
@@ -94,7 +102,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
 }
 
 fn make(args: MakeArgs) -> Result<()> {
-    let robot = Robot::panda()?;
+    let robot = args.robot.load()?;
     let generator = bench::make_problems::generator(&robot)?;
     let settings = MakeSettings {
         seed: args.seed,
@@ -125,7 +133,7 @@ fn label(args: LabelArgs) -> Result<()> {
             format!("must be in 0..={most}, got {}", args.restarts),
         ));
     }
-    let robot = Robot::panda()?;
+    let robot = args.robot.load()?;
     let labels = bench::typical_labels::label_typical(&robot, args.count, args.restarts, true)
         .map_err(super::as_flag_error)?;
     labels.save(&args.out)?;
@@ -159,8 +167,10 @@ fn run_suite(args: BenchArgs) -> Result<()> {
         workers: args.workers,
         progress: true,
     };
+    let robot = args.robot.load()?;
     let report = match (&args.model, &args.data) {
         (Some(model), Some(data)) => bench::run_model_suite(
+            &robot,
             bench::ModelSource {
                 model,
                 data,
@@ -173,6 +183,7 @@ fn run_suite(args: BenchArgs) -> Result<()> {
             &command,
         )?,
         (None, None) => bench::run_suite(
+            &robot,
             &args.problems,
             &args.out,
             methods,

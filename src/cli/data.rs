@@ -63,6 +63,9 @@ pub struct GenerateArgs {
     /// Hide the progress bar.
     #[arg(long)]
     pub quiet: bool,
+    /// The robot.
+    #[command(flatten)]
+    pub robot: super::RobotArgs,
 }
 
 /// Flags of `dpmp data stats`.
@@ -76,6 +79,9 @@ pub struct StatsArgs {
     /// Print JSON instead of a table.
     #[arg(long)]
     pub json: bool,
+    /// The robot.
+    #[command(flatten)]
+    pub robot: super::RobotArgs,
 }
 
 /// Flags of `dpmp data preview`.
@@ -93,6 +99,9 @@ pub struct PreviewArgs {
     /// Seed.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// The robot.
+    #[command(flatten)]
+    pub robot: super::RobotArgs,
 }
 
 /// `pre-grasp` or `berry`.
@@ -143,7 +152,7 @@ fn run_generate(a: GenerateArgs) -> Result<()> {
         return Err(Error::invalid("workers", "must be >= 1"));
     }
     check_output_dir(&a.out, a.overwrite)?;
-    let generator = Generator::new(settings, Robot::panda()?)?;
+    let generator = Generator::new(settings, a.robot.load()?)?;
     let summary = generate(
         &generator,
         &GenerateOptions {
@@ -196,7 +205,7 @@ pub fn stats_of_annotations(dir: &Path, robot: &Robot) -> Result<DatasetStats> {
 }
 
 fn run_stats(a: StatsArgs) -> Result<()> {
-    let robot = Robot::panda()?;
+    let robot = a.robot.load()?;
     let synthetic = stats_of_dataset(&a.dir, &robot)?;
     let reference = a
         .reference
@@ -214,7 +223,7 @@ fn run_stats(a: StatsArgs) -> Result<()> {
 
 fn run_preview(a: PreviewArgs) -> Result<()> {
     let settings = SynthSettings::new(1, a.berries);
-    let generator = Generator::new(settings, Robot::panda()?)?;
+    let generator = Generator::new(settings, a.robot.load()?)?;
     let output = generator.config(a.seed, a.config)?;
     std::fs::create_dir_all(&a.out).map_err(|e| Error::file(&a.out, e.to_string()))?;
     for (record, image) in output.records.iter().zip(&output.images) {

@@ -31,6 +31,9 @@ pub struct EvalArgs {
     /// Covariance weight alpha of the Eq. 7 column (default: the model's).
     #[arg(long)]
     pub alpha: Option<f64>,
+    /// The robot (must be the one the model was trained for).
+    #[command(flatten)]
+    pub robot: super::RobotArgs,
 }
 
 /// Run `dpmp eval`.
@@ -53,7 +56,8 @@ pub fn run(args: EvalArgs) -> crate::Result<()> {
         None => model.config().training.as_ref().map_or(1.0, |t| t.alpha),
     };
     let data = load_split(&args.data, &args.split, &model.config().preprocess)?;
-    let robot = std::sync::Arc::new(crate::robot::Robot::panda()?);
+    let robot = std::sync::Arc::new(args.robot.load()?);
+    model.config().check_robot(&robot)?;
     let fk = |q: &[f64]| robot.tcp_pose(q);
     let (mut report, embedding) = evaluate(&model, &data.samples, &args.split, alpha, &fk)?;
     report.planning = evaluate_plans(&model, &robot, &args.data, &args.split)?;

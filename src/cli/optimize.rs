@@ -4,7 +4,6 @@
 
 use crate::optim::{optimize, OptimizeRequest, OptimizeResponse, Problem};
 use crate::plot::{format_of, joint_panels, JointSeries};
-use crate::robot::Robot;
 use crate::{Error, Result};
 use nalgebra::{DMatrix, DVector};
 use plotters::style::RGBColor;
@@ -20,15 +19,9 @@ pub struct OptimizeArgs {
     /// joint into this `.png` or `.svg` file.
     #[arg(long)]
     pub plot: Option<PathBuf>,
-    /// Robot URDF (default: the shipped Panda).
-    #[arg(long)]
-    pub robot: Option<PathBuf>,
-    /// Base link of `--robot`.
-    #[arg(long, default_value = "panda_link0")]
-    pub base: String,
-    /// Tip link of `--robot`.
-    #[arg(long, default_value = "panda_tcp")]
-    pub tip: String,
+    /// The robot.
+    #[command(flatten)]
+    pub robot: super::RobotArgs,
 }
 
 /// Run `dpmp optimize`.
@@ -36,10 +29,7 @@ pub fn run(args: OptimizeArgs) -> Result<()> {
     if let Some(plot) = &args.plot {
         format_of(plot, "--plot")?;
     }
-    let robot = match &args.robot {
-        Some(path) => Robot::from_urdf_file(path, &args.base, &args.tip)?,
-        None => Robot::panda()?,
-    };
+    let robot = args.robot.load()?;
     let request = read_request(&args.request)?;
     let response = optimize(&request, &robot).map_err(|e| in_file(e, &args.request))?;
     if let Some(plot) = &args.plot {

@@ -6,7 +6,6 @@ use crate::net::Model;
 use crate::optim::OptimizeRequest;
 use crate::perception::depth::{DepthImage, DEFAULT_DEPTH_SCALE_M};
 use crate::plan::{predict_and_optimize, PlanInput, TargetInput};
-use crate::robot::Robot;
 use crate::{Error, Result};
 use clap::Args;
 use std::path::PathBuf;
@@ -51,9 +50,13 @@ pub struct PlanArgs {
     /// Scene file `{"obstacles": [...]}` (request schema).
     #[arg(long)]
     pub scene: Option<PathBuf>,
-    /// Trained model folder (model.safetensors + config.json).
-    #[arg(long, default_value = "models/default")]
+    /// Trained model folder (model.safetensors + config.json; also from
+    /// DPMP_MODEL_DIR).
+    #[arg(long, env = super::serve::MODEL_DIR_ENV, default_value = super::serve::DEFAULT_MODEL_DIR)]
     pub model: PathBuf,
+    /// The robot (must be the one the model was trained for).
+    #[command(flatten)]
+    pub robot: super::RobotArgs,
     /// Required clearance to every obstacle (m).
     #[arg(long, default_value_t = 0.02)]
     pub clearance: f64,
@@ -89,7 +92,8 @@ pub fn run(args: PlanArgs) -> Result<()> {
         ));
     }
     let model = Arc::new(Model::load(&args.model)?);
-    let robot = Arc::new(Robot::panda()?);
+    let robot = Arc::new(args.robot.load()?);
+    model.config().check_robot(&robot)?;
     let target = target_input(&args, &image)?;
     let input = PlanInput {
         image,

@@ -18,7 +18,7 @@ pub enum RobotCommand {
     /// Inverse kinematics for a TCP position (and optional approach axis).
     Ik(IkArgs),
     /// The collision primitives of every link (link frames).
-    Shapes(ModelArgs),
+    Shapes(super::RobotArgs),
     /// Per mesh link: the exact containment check of the mesh in its hull
     /// and how much clearance the hull gives away (gap mean/median/max).
     Geometry(GeometryArgs),
@@ -32,21 +32,7 @@ pub struct GeometryArgs {
     pub spacing: f64,
     /// The robot model.
     #[command(flatten)]
-    pub model: ModelArgs,
-}
-
-/// Which robot to load (default: the shipped Panda).
-#[derive(Debug, clap::Args)]
-pub struct ModelArgs {
-    /// A URDF file instead of the shipped Panda.
-    #[arg(long)]
-    pub urdf: Option<PathBuf>,
-    /// Base link of the chain (with --urdf).
-    #[arg(long, default_value = "panda_link0")]
-    pub base: String,
-    /// Tip link of the chain (with --urdf).
-    #[arg(long, default_value = "panda_tcp")]
-    pub tip: String,
+    pub robot: super::RobotArgs,
 }
 
 /// Arguments of `dpmp robot fk`.
@@ -57,7 +43,7 @@ pub struct FkArgs {
     pub q: String,
     /// The robot model.
     #[command(flatten)]
-    pub model: ModelArgs,
+    pub robot: super::RobotArgs,
 }
 
 /// Arguments of `dpmp robot clearance`.
@@ -74,7 +60,7 @@ pub struct ClearanceArgs {
     pub activation: Option<f64>,
     /// The robot model.
     #[command(flatten)]
-    pub model: ModelArgs,
+    pub robot: super::RobotArgs,
 }
 
 /// Arguments of `dpmp robot ik`.
@@ -91,17 +77,17 @@ pub struct IkArgs {
     pub seed: Option<String>,
     /// The robot model.
     #[command(flatten)]
-    pub model: ModelArgs,
+    pub robot: super::RobotArgs,
 }
 
 /// Run a `dpmp robot` subcommand.
 pub fn run(command: RobotCommand) -> Result<()> {
     let value = match command {
-        RobotCommand::Fk(args) => fk_json(&load_robot(&args.model)?, &args.q)?,
+        RobotCommand::Fk(args) => fk_json(&args.robot.load()?, &args.q)?,
         RobotCommand::Clearance(args) => clearance_json(&args)?,
         RobotCommand::Ik(args) => ik_json(&args)?,
-        RobotCommand::Shapes(model) => {
-            let robot = load_robot(&model)?;
+        RobotCommand::Shapes(robot_args) => {
+            let robot = robot_args.load()?;
             json!({"link_names": robot.link_names(), "shapes": robot.collision_shapes()})
         }
         RobotCommand::Geometry(args) => {
@@ -111,7 +97,7 @@ pub fn run(command: RobotCommand) -> Result<()> {
                     format!("must be within [0.0005, 0.05] m, got {}", args.spacing),
                 ));
             }
-            let robot = load_robot(&args.model)?;
+            let robot = args.robot.load()?;
             json!({
                 "links": robot.hull_tightness(args.spacing),
                 "warnings": robot.warnings(),
@@ -119,14 +105,6 @@ pub fn run(command: RobotCommand) -> Result<()> {
         }
     };
     super::print_json(&value)
-}
-
-/// The robot named by the flags.
-pub fn load_robot(model: &ModelArgs) -> Result<Robot> {
-    match &model.urdf {
-        None => Robot::panda(),
-        Some(path) => Robot::from_urdf_file(path, &model.base, &model.tip),
-    }
 }
 
 /// Parse `a,b,c` into numbers; errors name `flag[i]`.
@@ -173,7 +151,7 @@ pub fn fk_json(robot: &Robot, q_text: &str) -> Result<Value> {
 }
 
 fn clearance_json(args: &ClearanceArgs) -> Result<Value> {
-    let robot = load_robot(&args.model)?;
+    let robot = args.robot.load()?;
     let q = parse_configuration(&robot, "--q", &args.q)?;
     let scene = Scene::from_file(&args.scene)?;
     let frames = robot.fk(&q);
@@ -223,7 +201,7 @@ fn named_clearance(c: &Clearance, robot: &Robot, scene: &Scene) -> Value {
 }
 
 fn ik_json(args: &IkArgs) -> Result<Value> {
-    let robot = load_robot(&args.model)?;
+    let robot = args.robot.load()?;
     let position = parse_vector("--position", &args.position)?;
     let approach_axis = match &args.axis {
         None => None,

@@ -1,7 +1,7 @@
 //! `dpmp serve`: run the HTTP service (see [`crate::service`]).
 //!
 //! ```text
-//! dpmp serve [--addr 127.0.0.1:8080] [--model models/default] [--robot models/panda/panda.urdf]
+//! dpmp serve [--addr 127.0.0.1:8080] [--model models/default] [--robot URDF --base LINK --tip LINK]
 //!            [--token-file FILE] [--body-limit-mib 16] [--max-pixels N] [--max-obstacles N]
 //!            [--max-samples N] [--deadline-ms 2000] [--concurrency N] [--queue N]
 //!            [--cors-origin URL]... [--log-json]
@@ -9,7 +9,6 @@
 //! The token may also come from `DPMP_API_TOKEN`; it is never logged.
 
 use crate::net::Model;
-use crate::robot::Robot;
 use crate::service::auth::{Token, TOKEN_ENV};
 use crate::service::{AppState, ServiceConfig};
 use crate::{Error, Result};
@@ -23,20 +22,15 @@ pub struct ServeArgs {
     /// Address to listen on.
     #[arg(long, default_value = crate::service::config::DEFAULT_ADDR)]
     pub addr: String,
-    /// Trained network directory (model.safetensors + config.json). Without
-    /// the flag `models/default` is used when present; otherwise the service
-    /// starts without a model and `/v1/plan` answers 503.
-    #[arg(long)]
+    /// Trained network directory (model.safetensors + config.json; also
+    /// from DPMP_MODEL_DIR). Without either, `models/default` is used when
+    /// present; otherwise the service starts without a model and `/v1/plan`
+    /// answers 503.
+    #[arg(long, env = MODEL_DIR_ENV)]
     pub model: Option<PathBuf>,
-    /// Robot URDF (default: the shipped Panda, models/panda/panda.urdf).
-    #[arg(long)]
-    pub robot: Option<PathBuf>,
-    /// Base link of the chain in `--robot`.
-    #[arg(long, default_value = "panda_link0")]
-    pub base_link: String,
-    /// Tip link of the chain in `--robot`.
-    #[arg(long, default_value = "panda_tcp")]
-    pub tip_link: String,
+    /// The robot.
+    #[command(flatten)]
+    pub robot: super::RobotArgs,
     /// File holding the bearer token (overrides DPMP_API_TOKEN).
     #[arg(long)]
     pub token_file: Option<PathBuf>,
@@ -77,10 +71,14 @@ pub struct ServeArgs {
 /// Model directory tried when `--model` is not given.
 pub const DEFAULT_MODEL_DIR: &str = "models/default";
 
+/// The environment variable naming the model directory (for an installed
+/// binary that runs outside the repository).
+pub const MODEL_DIR_ENV: &str = "DPMP_MODEL_DIR";
+
 /// Run `dpmp serve`.
 pub fn run(args: ServeArgs) -> Result<()> {
     init_logging(args.log_json);
-    let robot = load_robot(&args)?;
+    let robot = args.robot.load()?;
     if let Some(seed) = args.print_typical_request {
         let settings = crate::optim::example::ExampleSettings::default();
         let request = crate::optim::example::typical_request(&robot, seed, &settings)?;
@@ -90,14 +88,6 @@ pub fn run(args: ServeArgs) -> Result<()> {
     let model = load_model(args.model.as_deref())?;
     let state = AppState::new(config, robot, model)?;
     crate::service::serve(state)
-}
-
-/// The shipped Panda, or `--robot` with `--base-link`/`--tip-link`.
-fn load_robot(args: &ServeArgs) -> Result<Robot> {
-    match &args.robot {
-        None => Robot::panda(),
-        Some(path) => Robot::from_urdf_file(path, &args.base_link, &args.tip_link),
-    }
 }
 
 /// `--model DIR` must load; without the flag `models/default` is loaded

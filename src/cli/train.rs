@@ -1,7 +1,7 @@
 //! `dpmp train`: train a dPMP network on a generated dataset.
 
 use crate::net::Arch;
-use crate::train::{train, TrainSettings};
+use crate::train::{train_for, TrainSettings};
 use std::path::PathBuf;
 
 /// Arguments of `dpmp train`.
@@ -70,6 +70,9 @@ pub struct TrainArgs {
     /// Hide progress bars.
     #[arg(long)]
     pub quiet: bool,
+    /// The robot of the dataset's demonstrations (recorded in the model).
+    #[command(flatten)]
+    pub robot: super::RobotArgs,
 }
 
 impl TrainArgs {
@@ -100,6 +103,6 @@ impl TrainArgs {
 
 /// Run `dpmp train`; prints the training record as JSON.
 pub fn run(args: TrainArgs) -> crate::Result<()> {
-    let outcome = train(&args.settings()?)?;
+    let outcome = train_for(&args.settings()?, &args.robot.load()?)?;
     crate::cli::print_json(&outcome)
 }

@@ -197,6 +197,10 @@ pub struct ModelConfig {
     /// centre); such a model needs depth (or a 3-D target) to predict.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub depth_condition: bool,
+    /// The robot the model was trained for (its demonstrations' robot).
+    /// Configs without it were trained for the shipped Panda.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub robot: Option<crate::robot::RobotIdentity>,
     /// Crate version that wrote the file.
     pub code_version: String,
     /// Training record, if trained.
@@ -224,6 +228,7 @@ impl ModelConfig {
             dataset: None,
             camera: None,
             depth_condition: false,
+            robot: None,
             code_version: env!("CARGO_PKG_VERSION").to_string(),
             training: None,
         };
@@ -266,6 +271,18 @@ impl ModelConfig {
     /// Side of the feature map after the encoder's conv blocks.
     pub fn encoded_side(&self) -> usize {
         self.preprocess.input_size >> self.encoder_channels.len()
+    }
+
+    /// `Ok` when `robot` is the robot this model was trained for (configs
+    /// without a record: the shipped Panda); otherwise an error (field
+    /// `robot`) saying which robot it was trained for.
+    pub fn check_robot(&self, robot: &crate::robot::Robot) -> Result<()> {
+        match &self.robot {
+            Some(identity) => identity.check(robot, &self.name),
+            None => crate::robot::Robot::panda()?
+                .identity()
+                .check(robot, &self.name),
+        }
     }
 
     /// Check every field; errors name the field.

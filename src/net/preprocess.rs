@@ -83,7 +83,7 @@ impl Prepared {
             let depth = self.depth_m.ok_or_else(|| {
                 Error::invalid(
                     "depth_base64",
-                    "this model is conditioned on the target's depth: send an aligned depth image (depth_base64, --depth) or target_position",
+                    "this model is conditioned on the target's depth: send an aligned depth image (depth_base64, --depth) or target_position, or serve a box-only model (models/rgb-only)",
                 )
             })?;
             values.push(((depth - DEPTH_CONDITION_CENTRE_M) / DEPTH_CONDITION_SCALE_M) as f32);

@@ -120,6 +120,8 @@ impl JointLimit {
 #[derive(Clone, Debug)]
 pub struct Robot {
     pub(crate) name: String,
+    /// SHA-256 of the URDF text the robot was loaded from.
+    pub(crate) urdf_sha256: String,
     pub(crate) joint_names: Vec<String>,
     pub(crate) limits: Vec<JointLimit>,
     pub(crate) link_names: Vec<String>,
@@ -135,6 +137,56 @@ pub struct Robot {
     /// collision geometry moves per unit of that joint (m/rad; 1 for a
     /// prismatic joint). See [`Robot::lever_arms`].
     pub(crate) lever_arms: Vec<f64>,
+}
+
+/// A robot model's identity: its name, chain and joints, and the SHA-256
+/// of its URDF text. A trained model records the identity of the robot its
+/// demonstrations were recorded on; planning with another robot is refused.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RobotIdentity {
+    /// The URDF's robot name.
+    pub name: String,
+    /// Base link of the chain.
+    pub base: String,
+    /// Tip link of the chain.
+    pub tip: String,
+    /// Actuated joints, base to tip (the order of the weights).
+    pub joint_names: Vec<String>,
+    /// Hex SHA-256 of the URDF text.
+    pub urdf_sha256: String,
+}
+
+impl RobotIdentity {
+    /// `Ok` when `robot` is this robot; otherwise an error (field `robot`)
+    /// saying what differs, for a model called `model`.
+    pub fn check(&self, robot: &Robot, model: &str) -> Result<()> {
+        let other = robot.identity();
+        let differs = if self.joint_names != other.joint_names {
+            format!("joints {:?}, not {:?}", self.joint_names, other.joint_names)
+        } else if (&self.name, &self.base, &self.tip) != (&other.name, &other.base, &other.tip) {
+            format!(
+                "robot '{}' from {} to {}, not '{}' from {} to {}",
+                self.name, self.base, self.tip, other.name, other.base, other.tip
+            )
+        } else if self.urdf_sha256 != other.urdf_sha256 {
+            format!(
+                "a URDF with SHA-256 {}, not {}",
+                short(&self.urdf_sha256),
+                short(&other.urdf_sha256)
+            )
+        } else {
+            return Ok(());
+        };
+        Err(Error::invalid(
+            "robot",
+            format!("model '{model}' was trained for another robot: {differs}; load the robot it was trained for (--robot) or a model trained for this one"),
+        ))
+    }
+}
+
+fn short(hash: &str) -> &str {
+    &hash[..hash.len().min(12)]
 }
 
 impl Robot {
@@ -258,6 +310,17 @@ impl Robot {
         &self.name
     }
 
+    /// What identifies this robot in a trained model's config.
+    pub fn identity(&self) -> RobotIdentity {
+        RobotIdentity {
+            name: self.name.clone(),
+            base: self.link_names[0].clone(),
+            tip: self.link_names[self.tcp_link()].clone(),
+            joint_names: self.joint_names.clone(),
+            urdf_sha256: self.urdf_sha256.clone(),
+        }
+    }
+
     /// Number of actuated joints (7 for the Panda).
     pub fn dof(&self) -> usize {
         self.joint_names.len()
@@ -340,6 +403,37 @@ fn step_length(step: &ChainStep, limits: &[JointLimit]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_model_for_another_robot_is_told_what_differs() {
+        let load = |xml: &str, tip: &str| {
+            urdf::robot_from_str(xml, "panda_link0", tip, &MeshFiles::Embedded(PANDA_MESHES))
+                .unwrap()
+        };
+        let panda = Robot::panda().unwrap();
+        let identity = panda.identity();
+        assert_eq!(identity.urdf_sha256.len(), 64);
+        assert!(identity.check(&panda, "m").is_ok());
+        // The same URDF text loaded again: the same robot.
+        let again = load(PANDA_URDF, "panda_tcp");
+        assert!(identity.check(&again, "m").is_ok());
+        // Other joints.
+        let renamed = PANDA_URDF.replace("\"panda_joint7\"", "\"wrist\"");
+        let short = load(&renamed, "panda_tcp");
+        let e = identity.check(&short, "m").unwrap_err();
+        assert_eq!(e.field(), Some("robot"));
+        assert!(e.to_string().contains("joints"), "{e}");
+        // Same chain, another tip: told the tip.
+        let hand = load(PANDA_URDF, "panda_hand");
+        let e = identity.check(&hand, "m").unwrap_err().to_string();
+        assert!(e.contains("panda_hand") && e.contains("model 'm'"), "{e}");
+        // An edited URDF (another link length): told the hash.
+        let edited = PANDA_URDF.replacen("0.333", "0.343", 1);
+        assert_ne!(edited, PANDA_URDF);
+        let longer = load(&edited, "panda_tcp");
+        let e = identity.check(&longer, "m").unwrap_err().to_string();
+        assert!(e.contains("SHA-256"), "{e}");
+    }
 
     #[test]
     fn panda_has_seven_joints_and_the_named_links() {

@@ -23,7 +23,9 @@ use std::collections::HashMap;
 pub fn robot_from_str(xml: &str, base: &str, tip: &str, files: &MeshFiles) -> Result<Robot> {
     let model = urdf_rs::read_from_string(xml)
         .map_err(|e| Error::invalid("urdf", format!("malformed URDF: {e}")))?;
-    build(&model, base, tip, files).map_err(|e| e.within("urdf"))
+    let mut robot = build(&model, base, tip, files).map_err(|e| e.within("urdf"))?;
+    robot.urdf_sha256 = urdf_sha256(xml);
+    Ok(robot)
 }
 
 /// The link/joint tree of a URDF, indexed by name.
@@ -78,6 +80,7 @@ fn build(model: &urdf_rs::Robot, base: &str, tip: &str, files: &MeshFiles) -> Re
     let home = limits.iter().map(JointLimit::mid).collect();
     Ok(Robot {
         name: model.name.clone(),
+        urdf_sha256: String::new(),
         joint_names,
         limits,
         link_names,
@@ -89,6 +92,15 @@ fn build(model: &urdf_rs::Robot, base: &str, tip: &str, files: &MeshFiles) -> Re
         lever_arms: Vec::new(),
     }
     .with_lever_arms())
+}
+
+/// Hex SHA-256 of the URDF text (the robot's identity in model configs).
+fn urdf_sha256(xml: &str) -> String {
+    use sha2::Digest;
+    sha2::Sha256::digest(xml.as_bytes())
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
 }
 
 impl<'a> Tree<'a> {

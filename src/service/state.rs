@@ -38,6 +38,9 @@ impl AppState {
         model: Option<Model>,
     ) -> crate::Result<AppState> {
         config.validate()?;
+        if let Some(model) = &model {
+            model.config().check_robot(&robot)?;
+        }
         let limiter = Limiter::new(config.max_concurrency, config.max_queue);
         let robot_info = to_json("robot", &routes::robot::describe(&robot))?;
         let models_info = to_json("models", &routes::models::describe(model.as_ref()))?;

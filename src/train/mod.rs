@@ -17,4 +17,4 @@ pub mod plan_eval;
 pub mod tcp_loss;
 pub mod trainer;
 
-pub use trainer::{train, ShapeSettings, TrainOutcome, TrainSettings};
+pub use trainer::{train, train_for, ShapeSettings, TrainOutcome, TrainSettings};

@@ -272,8 +272,16 @@ struct Losses<'a> {
     tcp: Option<&'a TcpLoss>,
 }
 
-/// Train a model as the settings say; the best weights end in `settings.out`.
+/// Train a model for the shipped Panda as the settings say; the best
+/// weights end in `settings.out`.
 pub fn train(settings: &TrainSettings) -> Result<TrainOutcome> {
+    train_for(settings, &crate::robot::Robot::panda()?)
+}
+
+/// Train a model for `robot` (the robot of the dataset's demonstrations:
+/// the task-space term uses its kinematics and the model records its
+/// identity, so planning with another robot is refused).
+pub fn train_for(settings: &TrainSettings, robot: &crate::robot::Robot) -> Result<TrainOutcome> {
     settings.validate()?;
     let device = Device::Cpu;
     let train_set = load_split(&settings.data, "train", &default_preprocess(settings))?;
@@ -281,13 +289,24 @@ pub fn train(settings: &TrainSettings) -> Result<TrainOutcome> {
     if train_set.samples.is_empty() {
         return Err(Error::invalid("data", "the train split is empty"));
     }
-    let config = build_config(settings, &train_set, val_set.samples.len())?;
+    let mut config = build_config(settings, &train_set, val_set.samples.len())?;
+    if config.n_joints != robot.dof() {
+        return Err(Error::invalid(
+            "robot",
+            format!(
+                "the dataset has {} joints, robot '{}' has {}",
+                config.n_joints,
+                robot.name(),
+                robot.dof()
+            ),
+        ));
+    }
+    config.robot = Some(robot.identity());
     let network = Network::new(config, settings.seed, &device).map_err(candle_error)?;
     let basis = Basis::new(&network.config().promp)?;
     let op = TrajectoryOperator::new(&basis, &device).map_err(candle_error)?;
     let tcp = if settings.tcp_weight > 0.0 {
-        let robot = crate::robot::Robot::panda()?;
-        Some(TcpLoss::new(&robot, &basis, &device).map_err(candle_error)?)
+        Some(TcpLoss::new(robot, &basis, &device).map_err(candle_error)?)
     } else {
         None
     };
