@@ -204,17 +204,6 @@ pub fn prior_towards_goal(
         .distribution)
 }
 
-/// The camera that took the image: the model's camera model posed at the
-/// robot's home configuration.
-pub fn capture_camera(model: &Model, robot: &Robot) -> Result<Camera> {
-    let home = robot.tcp_pose(&robot.home());
-    Camera::on_gripper(
-        &model.config().camera_model(),
-        Point3::from(home.translation.vector),
-        home.rotation * Vector3::z(),
-    )
-}
-
 /// A berry centre, its measured depth and where it came from.
 struct Located {
     position: [f64; 3],
@@ -235,7 +224,7 @@ fn locate(
     if let TargetInput::None = target {
         return Ok(None);
     }
-    let camera = capture_camera(model, robot)?;
+    let camera = Camera::at_home(&model.config().camera_model(), robot)?;
     match target {
         TargetInput::None => Ok(None),
         TargetInput::Position(p) => {

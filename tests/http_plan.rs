@@ -201,7 +201,7 @@ fn plan_with_depth_goes_to_the_berry_it_measured() {
     assert_eq!(target["source"], "depth");
     let position = numbers(&target["position"]);
     assert!(
-        distance(&position, &record.target_position) < 0.008,
+        distance(&position, &record.target_position.unwrap()) < 0.008,
         "{target}"
     );
     let robot = Robot::panda().unwrap();

@@ -86,7 +86,7 @@ fn manifest_lists_only_existing_valid_files_and_splits_by_config() {
         let camera = g.camera();
         let t = locate_target(&depth, &r.bbox, camera, "depth").unwrap();
         assert_eq!(t.depth_m, measured);
-        let truth = nalgebra::Point3::from(r.target_position);
+        let truth = nalgebra::Point3::from(r.target_position.unwrap());
         let error = (nalgebra::Point3::from(t.position) - truth).norm();
         assert!(error < 0.008, "{}: {error} m", r.id);
     }

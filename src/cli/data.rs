@@ -21,6 +21,38 @@ pub enum DataCommand {
     Stats(StatsArgs),
     /// Render the images of one configuration to PNG files (no dataset).
     Preview(PreviewArgs),
+    /// Write a trainable dataset from your own images, boxes, depth and
+    /// demonstrations (a JSON manifest; see the README).
+    Import(ImportArgs),
+}
+
+/// Flags of `dpmp data import`.
+#[derive(Debug, clap::Args)]
+pub struct ImportArgs {
+    /// The import manifest (JSON; paths in it are relative to it).
+    #[arg(long)]
+    pub manifest: PathBuf,
+    /// Output dataset folder (must not exist unless --overwrite).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Fraction of groups (plants) for validation.
+    #[arg(long, default_value_t = 0.1)]
+    pub val_fraction: f64,
+    /// Fraction of groups for test.
+    #[arg(long, default_value_t = 0.1)]
+    pub test_fraction: f64,
+    /// Seed of the split.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// The ProMP basis.
+    #[command(flatten)]
+    pub promp: crate::cli::PrompArgs,
+    /// Replace an existing dataset in --out.
+    #[arg(long)]
+    pub overwrite: bool,
+    /// The robot of the demonstrations.
+    #[command(flatten)]
+    pub robot: super::RobotArgs,
 }
 
 /// Flags of `dpmp data generate`.
@@ -119,7 +151,24 @@ pub fn run(command: DataCommand) -> Result<()> {
         DataCommand::Generate(a) => run_generate(a),
         DataCommand::Stats(a) => run_stats(a),
         DataCommand::Preview(a) => run_preview(a),
+        DataCommand::Import(a) => run_import(a),
     }
+}
+
+fn run_import(a: ImportArgs) -> Result<()> {
+    let promp = a.promp.config()?;
+    let settings = crate::demos::ImportSettings {
+        promp,
+        val_fraction: a.val_fraction,
+        test_fraction: a.test_fraction,
+        seed: a.seed,
+        overwrite: a.overwrite,
+        progress: true,
+    };
+    let robot = a.robot.load()?;
+    let summary = crate::demos::import(&a.manifest, &a.out, &robot, &settings)
+        .map_err(super::as_flag_error)?;
+    super::print_json(&summary)
 }
 
 /// Settings from the flags (and the optional settings file), validated.

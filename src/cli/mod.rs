@@ -14,11 +14,13 @@ pub mod eval;
 pub mod optimize;
 pub mod plan;
 pub mod prior;
+pub mod promp_args;
 pub mod robot;
 pub mod robot_args;
 pub mod serve;
 pub mod train;
 
+pub use promp_args::PrompArgs;
 pub use robot_args::RobotArgs;
 
 /// dPMP: learned ProMP priors and constrained trajectory optimisation for

@@ -41,15 +41,9 @@ pub struct FitArgs {
     /// The robot the demonstrations were recorded on.
     #[command(flatten)]
     pub robot: crate::cli::RobotArgs,
-    /// Basis functions per joint.
-    #[arg(long, default_value_t = 8)]
-    pub n_basis: usize,
-    /// Basis width h.
-    #[arg(long, default_value_t = 0.07)]
-    pub width: f64,
-    /// Phase samples T.
-    #[arg(long, default_value_t = 150)]
-    pub n_samples: usize,
+    /// The ProMP basis.
+    #[command(flatten)]
+    pub promp: crate::cli::PrompArgs,
     /// Also plot the prior (mean ±2σ per joint) into this .png or .svg.
     #[arg(long)]
     pub plot: Option<PathBuf>,
@@ -152,11 +146,7 @@ fn fit(args: &FitArgs) -> Result<()> {
     if let Some(plot) = &args.plot {
         crate::plot::format_of(plot, "--plot")?;
     }
-    let config = PrompConfig {
-        n_basis: args.n_basis,
-        width: args.width,
-        n_samples: args.n_samples,
-    };
+    let config = args.promp.config()?;
     let basis = Basis::new(&config).map_err(crate::cli::as_flag_error)?;
     let robot = args.robot.load()?;
     let paths = demos::demonstration_paths(&args.demos)?;

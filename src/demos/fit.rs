@@ -54,6 +54,8 @@ pub struct PriorFit {
     pub distribution: WeightDistribution,
     /// Each demonstration's figures, in input order.
     pub demos: Vec<DemoReport>,
+    /// Each demonstration's weights, in input order.
+    pub weights: Vec<DVector<f64>>,
 }
 
 impl PriorFit {
@@ -196,6 +198,7 @@ pub fn fit_prior(basis: &Basis, robot: &Robot, demos: &[Demonstration]) -> Resul
     Ok(PriorFit {
         distribution,
         demos: reports,
+        weights,
     })
 }
 

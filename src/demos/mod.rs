@@ -13,12 +13,15 @@
 //! to CSV looks like. [`file`] reads CSV and JSON and validates every cell;
 //! [`fit`] maps each recording onto the ProMP phase `[0, 1]` and fits its
 //! weights, so recordings of one motion at 1 kHz and at 30 Hz give the same
-//! weights.
+//! weights. [`import`] turns a manifest of images, boxes, depth and
+//! demonstrations into a trainable dataset (`dpmp data import`).
 
 pub mod file;
 pub mod fit;
+pub mod import;
 pub mod write;
 
 pub use file::{demonstration_paths, read_demonstration, Demonstration};
 pub use fit::{fit_demonstration, fit_prior, DemoFit, PriorFit};
+pub use import::{import, ImportManifest, ImportSettings, ImportSummary};
 pub use write::{write_prior, FitReport};

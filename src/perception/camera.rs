@@ -153,6 +153,17 @@ impl Camera {
         })
     }
 
+    /// The gripper camera of `robot` at its home configuration, where the
+    /// images are captured.
+    pub fn at_home(model: &CameraModel, robot: &crate::robot::Robot) -> Result<Camera> {
+        let home = robot.tcp_pose(&robot.home());
+        Camera::on_gripper(
+            model,
+            Point3::from(home.translation.vector),
+            home.rotation * Vector3::z(),
+        )
+    }
+
     /// The gripper camera for a TCP at `tcp` with gripper axis `axis`.
     pub fn on_gripper(model: &CameraModel, tcp: Point3<f64>, axis: Vector3<f64>) -> Result<Camera> {
         let f = axis

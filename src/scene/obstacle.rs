@@ -97,7 +97,7 @@ pub enum ObstacleShape {
 }
 
 /// The `--scene FILE.json` format: `{"obstacles": [...]}`.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct SceneFile {
     /// The obstacles, in the request schema.

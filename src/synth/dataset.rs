@@ -1,5 +1,7 @@
-//! The synthetic dataset on disk (`dpmp-dataset/2`; version 1, without
-//! depth, still loads):
+//! The dataset on disk, generated (`dpmp-dataset/2`; version 1, without
+//! depth, still loads) or imported from a lab's recordings
+//! (`dpmp-dataset/3`: no generator settings, targets grouped by plant,
+//! ids chosen by the lab; see [`crate::demos::import`]):
 //!
 //! ```text
 //! DIR/manifest.json                written last (temp file + rename)
@@ -8,7 +10,7 @@
 //! DIR/targets/<target_id>.json     one TargetRecord per target
 //! ```
 //!
-//! `target_id` is `c{config:04}_b{berry:02}`. The types here are the
+//! A generated `target_id` is `c{config:04}_b{berry:02}`. The types here are the
 //! contract with the network, training, evaluation and benchmark code;
 //! loaders validate shapes and finiteness and name the file and field.
 
@@ -26,8 +28,15 @@ use std::path::{Path, PathBuf};
 /// aligned depth images (`depth/<id>.png`) and each target's measured depth.
 pub const FORMAT: &str = "dpmp-dataset/2";
 
+/// The format tag of imported datasets: generator fields are absent,
+/// targets carry a `group` and whether their image is already masked.
+pub const IMPORT_FORMAT: &str = "dpmp-dataset/3";
+
 /// Format tags this version reads (version 1: colour only).
-pub const READABLE_FORMATS: [&str; 2] = ["dpmp-dataset/1", FORMAT];
+pub const READABLE_FORMATS: [&str; 3] = ["dpmp-dataset/1", FORMAT, IMPORT_FORMAT];
+
+/// Depth scale (m per unit) of imported depth images without one.
+pub const DEFAULT_DEPTH_SCALE_M: f64 = 0.001;
 
 /// `c{config:04}_b{berry:02}`.
 pub fn target_id(config: usize, berry: usize) -> String {
@@ -62,6 +71,23 @@ pub struct TargetEntry {
     /// when the dataset has depth.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub depth: Option<String>,
+    /// The plant (or other unit) the target belongs to; the splits keep a
+    /// group together. Imported datasets only (generated ones group by
+    /// `config`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub group: Option<String>,
+    /// Whether the image already shows the box painted white (generated
+    /// images do); `false` for imported images, painted at load time.
+    #[serde(default = "yes", skip_serializing_if = "is_yes")]
+    pub mask_applied: bool,
+}
+
+fn yes() -> bool {
+    true
+}
+
+fn is_yes(v: &bool) -> bool {
+    *v
 }
 
 impl TargetEntry {
@@ -72,6 +98,8 @@ impl TargetEntry {
             image: format!("images/{id}.png"),
             record: format!("targets/{id}.json"),
             depth: None,
+            group: None,
+            mask_applied: true,
             id,
             config,
             berry,
@@ -82,18 +110,33 @@ impl TargetEntry {
 /// `manifest.json`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Manifest {
-    /// Always [`FORMAT`].
+    /// One of [`READABLE_FORMATS`].
     pub format: String,
-    /// Crate version that generated the data.
-    pub generator_version: String,
-    /// Generator seed.
-    pub seed: u64,
-    /// Every generator setting.
-    pub settings: SynthSettings,
+    /// Crate version that generated (or imported) the data.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub generator_version: Option<String>,
+    /// Generator (or split) seed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seed: Option<u64>,
+    /// Every generator setting (generated datasets only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub settings: Option<SynthSettings>,
     /// ProMP basis of every record.
     pub promp: PrompConfig,
     /// Camera intrinsics of every image.
     pub camera: Intrinsics,
+    /// The camera with its gripper mount (imported datasets; generated
+    /// ones have it in `settings`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub camera_model: Option<crate::perception::CameraModel>,
+    /// Depth scale of the depth images (imported datasets; generated ones
+    /// have it in `settings`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub depth_scale_m: Option<f64>,
+    /// The robot of the demonstrations (imported datasets; generated ones
+    /// are the shipped Panda's).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub robot: Option<crate::robot::RobotIdentity>,
     /// Split by configuration.
     pub splits: Splits,
     /// Every target, in (config, berry) order.
@@ -101,6 +144,24 @@ pub struct Manifest {
 }
 
 impl Manifest {
+    /// The camera (intrinsics and gripper mount) that took the images.
+    pub fn camera_model(&self) -> crate::perception::CameraModel {
+        match (&self.camera_model, &self.settings) {
+            (Some(model), _) => *model,
+            (None, Some(settings)) => settings.camera.model(),
+            (None, None) => SynthSettings::default().camera.model(),
+        }
+    }
+
+    /// Metres per unit of the depth images.
+    pub fn depth_scale_m(&self) -> f64 {
+        match (self.depth_scale_m, &self.settings) {
+            (Some(scale), _) => scale,
+            (None, Some(settings)) => settings.depth.scale_m,
+            (None, None) => DEFAULT_DEPTH_SCALE_M,
+        }
+    }
+
     /// Entries of one split: `"train" | "val" | "test" | "all"`.
     pub fn split(&self, name: &str) -> Result<Vec<&TargetEntry>> {
         let ids = match name {
@@ -137,11 +198,19 @@ impl Manifest {
                 ),
             ));
         }
+        let mut ids = std::collections::HashSet::new();
         for (i, t) in self.targets.iter().enumerate() {
-            if t.id != target_id(t.config, t.berry) {
+            if self.settings.is_some() && t.id != target_id(t.config, t.berry) {
                 return Err(Error::invalid(
                     format!("targets[{i}].id"),
                     format!("{:?} does not match config/berry", t.id),
+                ));
+            }
+            check_target_id(&t.id).map_err(|e| e.within(&format!("targets[{i}]")))?;
+            if !ids.insert(t.id.as_str()) {
+                return Err(Error::invalid(
+                    format!("targets[{i}].id"),
+                    format!("{:?} appears twice", t.id),
                 ));
             }
             for (name, p) in [("image", &t.image), ("record", &t.record)] {
@@ -206,11 +275,15 @@ pub struct TargetRecord {
     /// Box centre `[cx, cy]` (px).
     pub center: [f64; 2],
     /// The whole configuration as obstacles (request schema).
+    #[serde(default)]
     pub scene: SceneFile,
-    /// Id of the target berry among the obstacles.
+    /// Id of the target berry among the obstacles (generated data).
+    #[serde(default)]
     pub target_obstacle_id: String,
-    /// Target berry centre (m).
-    pub target_position: [f64; 3],
+    /// Target berry centre (m): the truth in generated data; imported
+    /// data has none (its depth is a measurement).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub target_position: Option<[f64; 3]>,
     /// Mean demonstration start (rad).
     pub start: Vec<f64>,
     /// Mean final TCP pose.
@@ -244,7 +317,9 @@ impl TargetRecord {
             ));
         }
         ensure_finite("center", &self.center)?;
-        ensure_finite("target_position", &self.target_position)?;
+        if let Some(p) = &self.target_position {
+            ensure_finite("target_position", p)?;
+        }
         if let Some(d) = self.target_depth_m {
             if !(d.is_finite() && d > 0.0) {
                 return Err(Error::invalid(
@@ -303,6 +378,25 @@ impl TargetRecord {
         let mean = nalgebra::DVector::from_column_slice(&self.distribution.mean);
         let cov = nalgebra::DMatrix::from_fn(n, n, |i, j| self.distribution.cov[i][j]);
         crate::promp::WeightDistribution::new(mean, cov, self.start.len(), self.promp.n_basis)
+    }
+}
+
+/// A target id names files: letters, digits, `-`, `_` and `.`, not
+/// starting with `.`, at most 100 characters.
+pub fn check_target_id(id: &str) -> Result<()> {
+    let ok = !id.is_empty()
+        && id.len() <= 100
+        && !id.starts_with('.')
+        && id
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'));
+    if ok {
+        Ok(())
+    } else {
+        Err(Error::invalid(
+            "id",
+            format!("{id:?} must be 1-100 letters, digits, '-', '_' or '.', not starting with '.'"),
+        ))
     }
 }
 

@@ -323,7 +323,7 @@ impl Generator {
             center: box_center(&bbox),
             scene,
             target_obstacle_id: berry.id.clone(),
-            target_position: [berry.center.x, berry.center.y, berry.center.z],
+            target_position: Some([berry.center.x, berry.center.y, berry.center.z]),
             start: td.start,
             final_tcp: td.final_tcp,
             duration_s: self.settings.demos.duration_s,
@@ -360,11 +360,14 @@ impl Generator {
             .collect();
         Manifest {
             format: dataset::FORMAT.to_string(),
-            generator_version: env!("CARGO_PKG_VERSION").to_string(),
-            seed,
-            settings: s.clone(),
+            generator_version: Some(env!("CARGO_PKG_VERSION").to_string()),
+            seed: Some(seed),
+            settings: Some(s.clone()),
             promp: self.basis.config().clone(),
             camera: s.camera.model().intrinsics,
+            camera_model: None,
+            depth_scale_m: None,
+            robot: None,
             splits: split_by_config(s, seed),
             targets,
         }

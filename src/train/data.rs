@@ -72,7 +72,7 @@ pub fn load_split(dir: &Path, split: &str, preprocess: &PreprocessConfig) -> Res
         dir: dir.to_path_buf(),
         manifest_sha256,
         promp: manifest.promp.clone(),
-        camera: manifest.settings.camera.model(),
+        camera: manifest.camera_model(),
         samples,
     })
 }
@@ -81,7 +81,7 @@ fn load_sample(dir: &Path, entry: &TargetEntry, preprocess: &PreprocessConfig) -
     let record = dataset::load_record(dir, entry)?;
     let image = dataset::load_image(dir, entry)?;
     let record_path = dir.join(&entry.record);
-    let mut prepared = preprocess::prepare(&image, record.bbox, true, preprocess)
+    let mut prepared = preprocess::prepare(&image, record.bbox, entry.mask_applied, preprocess)
         .map_err(|e| Error::file(&record_path, e.to_string()))?;
     prepared.depth_m = record.target_depth_m;
     let distribution = record

@@ -335,13 +335,15 @@ pub fn to_markdown(report: &EvalReport) -> String {
     if let Some(p) = &report.planning {
         s += &format!(
             "## Depth-aware planning ({} targets)\n\n| figure | value |\n|---|---|\n\
-             | back-projected berry centre error, median / p95 | {:.1} / {:.1} mm |\n\
+             | back-projected berry centre error, median / p95 | {} |\n\
              | goal-conditioned prior final TCP vs demonstrations' mean, mean | {:.1} mm |\n\
              | plan final TCP vs demonstrations' mean, mean / p95 | {:.1} / {:.1} mm |\n\
              | plans verified optimal | {:.1} % |\n\n",
             p.plan_targets,
-            p.target_position_error_m * 1e3,
-            p.target_position_p95_error_m * 1e3,
+            match (p.target_position_error_m, p.target_position_p95_error_m) {
+                (Some(median), Some(p95)) => format!("{:.1} / {:.1} mm", median * 1e3, p95 * 1e3),
+                _ => "no ground truth".into(),
+            },
             p.plan_prior_mean_final_position_error_m * 1e3,
             p.plan_mean_final_position_error_m * 1e3,
             p.plan_p95_final_position_error_m * 1e3,

@@ -45,17 +45,20 @@ pub struct PlanEval {
     pub plan_prior_mean_final_position_error_m: f64,
     /// Fraction of plans verified `optimal`.
     pub plan_optimal_fraction: f64,
-    /// Median distance (m) of the back-projected berry centre to the true one.
-    pub target_position_error_m: f64,
+    /// Median distance (m) of the back-projected berry centre to the true
+    /// one (datasets that know it: generated ones).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub target_position_error_m: Option<f64>,
     /// Its 95th percentile (m).
-    pub target_position_p95_error_m: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub target_position_p95_error_m: Option<f64>,
 }
 
 /// One target's outcome.
 struct Outcome {
     final_error: f64,
     prior_error: f64,
-    target_error: f64,
+    target_error: Option<f64>,
     optimal: bool,
 }
 
@@ -68,7 +71,7 @@ pub fn evaluate_plans(
     split: &str,
 ) -> Result<Option<PlanEval>> {
     let manifest = dataset::load_manifest(dir)?;
-    let scale = manifest.settings.depth.scale_m;
+    let scale = manifest.depth_scale_m();
     let entries: Vec<&TargetEntry> = manifest
         .split(split)?
         .into_iter()
@@ -82,7 +85,8 @@ pub fn evaluate_plans(
         .map(|entry| plan_one(model, robot, dir, entry, scale))
         .collect::<Result<Vec<_>>>()?;
     let mut finals: Vec<f64> = outcomes.iter().map(|o| o.final_error).collect();
-    let mut targets: Vec<f64> = outcomes.iter().map(|o| o.target_error).collect();
+    let mut targets: Vec<f64> = outcomes.iter().filter_map(|o| o.target_error).collect();
+    let has_truth = !targets.is_empty();
     let n = outcomes.len() as f64;
     Ok(Some(PlanEval {
         plan_targets: outcomes.len(),
@@ -91,8 +95,8 @@ pub fn evaluate_plans(
         plan_prior_mean_final_position_error_m: outcomes.iter().map(|o| o.prior_error).sum::<f64>()
             / n,
         plan_optimal_fraction: outcomes.iter().filter(|o| o.optimal).count() as f64 / n,
-        target_position_error_m: percentile(&mut targets, 0.5),
-        target_position_p95_error_m: percentile(&mut targets, 0.95),
+        target_position_error_m: has_truth.then(|| percentile(&mut targets, 0.5)),
+        target_position_p95_error_m: has_truth.then(|| percentile(&mut targets, 0.95)),
     }))
 }
 
@@ -119,7 +123,7 @@ fn plan_one(
     let input = PlanInput {
         image,
         target_box: record.bbox,
-        mask_applied: true,
+        mask_applied: entry.mask_applied,
         target: TargetInput::Depth(depth, format!("depth of {}", entry.id)),
         goal_standoff_m: None,
         request,
@@ -146,7 +150,9 @@ fn plan_one(
     Ok(Outcome {
         final_error,
         prior_error,
-        target_error: (located - Vector3::from(record.target_position)).norm(),
+        target_error: record
+            .target_position
+            .map(|truth| (located - Vector3::from(truth)).norm()),
         optimal: answer.result.status == Status::Optimal,
     })
 }

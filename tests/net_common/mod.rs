@@ -104,7 +104,7 @@ pub fn write_dataset(
                 center: [(bx[0] + bx[2]) / 2.0, (bx[1] + bx[3]) / 2.0],
                 scene: dpmp::scene::SceneFile { obstacles: vec![] },
                 target_obstacle_id: format!("berry-{b}"),
-                target_position: [0.65, 0.0, 0.7],
+                target_position: Some([0.65, 0.0, 0.7]),
                 start: vec![0.0; N_JOINTS],
                 final_tcp: Pose {
                     position: [0.65, 0.0, 0.7],
@@ -132,9 +132,9 @@ pub fn write_dataset(
     }
     let manifest = Manifest {
         format: FORMAT.to_string(),
-        generator_version: "test".into(),
-        seed,
-        settings: dpmp::synth::settings::SynthSettings::default(),
+        generator_version: Some("test".into()),
+        seed: Some(seed),
+        settings: Some(dpmp::synth::settings::SynthSettings::default()),
         promp,
         camera: dpmp::synth::camera::Intrinsics {
             width,
@@ -144,6 +144,9 @@ pub fn write_dataset(
             cx: 320.0,
             cy: 240.0,
         },
+        camera_model: None,
+        depth_scale_m: None,
+        robot: None,
         splits,
         targets,
     };

@@ -1,0 +1,300 @@
+//! `dpmp data import` on the worked example in `examples/import/` (three
+//! plants, two berries each, three CSV demonstrations per berry, depth):
+//! the import is checked against independent computations (the recordings'
+//! final configurations through forward kinematics, the fit's residual),
+//! splits never share a plant, the result trains and plans end to end, and
+//! bad manifests are reported target by target with nothing written.
+
+mod cli_support;
+
+use cli_support::{arg, dpmp, dpmp_ok, stderr};
+use dpmp::robot::Robot;
+use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
+
+fn example() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/import")
+}
+
+fn read_json(path: &Path) -> Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+/// The last row of a demonstration CSV, joints only.
+fn last_configuration(csv: &Path) -> Vec<f64> {
+    let text = std::fs::read_to_string(csv).unwrap();
+    let last = text.lines().last().unwrap();
+    last.split(',')
+        .skip(1)
+        .take(7)
+        .map(|v| v.parse().unwrap())
+        .collect()
+}
+
+#[test]
+fn the_worked_example_imports_trains_and_plans() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let manifest = example().join("manifest.json");
+    let o = dpmp_ok(&[
+        "data",
+        "import",
+        "--manifest",
+        arg(&manifest),
+        "--out",
+        arg(&data),
+    ]);
+    let summary: Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(
+        (
+            &summary["targets"],
+            &summary["groups"],
+            &summary["demonstrations"]
+        ),
+        (&json!(6), &json!(3), &json!(18))
+    );
+    // The recordings are ProMP trajectories written to 6 decimals.
+    assert!(
+        summary["max_rms_residual_rad"].as_f64().unwrap() < 1e-5,
+        "{summary}"
+    );
+
+    // Splits keep each plant together.
+    let written = read_json(&data.join("manifest.json"));
+    assert_eq!(written["format"], "dpmp-dataset/3");
+    let group_of = |id: &str| id.split('-').next().unwrap().to_string();
+    let mut seen = std::collections::HashMap::new();
+    for split in ["train", "val", "test"] {
+        for id in written["splits"][split].as_array().unwrap() {
+            let previous = seen.insert(group_of(id.as_str().unwrap()), split);
+            assert!(previous.is_none_or(|p| p == split), "{id} in two splits");
+        }
+    }
+
+    // Each record's final TCP is the mean of its recordings' final TCPs.
+    let robot = Robot::panda().unwrap();
+    let input = read_json(&manifest);
+    for target in input["targets"].as_array().unwrap() {
+        let id = target["id"].as_str().unwrap();
+        let record = read_json(&data.join(format!("targets/{id}.json")));
+        let finals: Vec<_> = target["demos"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|f| {
+                let q = last_configuration(&example().join(f.as_str().unwrap()));
+                robot.tcp_pose(&q).translation.vector
+            })
+            .collect();
+        let mean = finals.iter().sum::<nalgebra::Vector3<f64>>() / finals.len() as f64;
+        let recorded: Vec<f64> = record["final_tcp"]["position"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        let error = (mean - nalgebra::Vector3::from_row_slice(&recorded)).norm();
+        assert!(error < 1e-9, "{id}: {error}");
+        assert!(record["target_depth_m"].as_f64().unwrap() > 0.2);
+        assert!(record.get("target_position").is_none());
+    }
+
+    // The same import again: the same bytes.
+    let again = dir.path().join("again");
+    dpmp_ok(&[
+        "data",
+        "import",
+        "--manifest",
+        arg(&manifest),
+        "--out",
+        arg(&again),
+    ]);
+    for file in ["manifest.json", "targets/plant1-berry0.json"] {
+        assert_eq!(
+            std::fs::read(data.join(file)).unwrap(),
+            std::fs::read(again.join(file)).unwrap(),
+            "{file}"
+        );
+    }
+
+    // Train a tiny depth-conditioned model for a few steps and plan with it.
+    let model = dir.path().join("model");
+    dpmp_ok(&[
+        "train",
+        "--data",
+        arg(&data),
+        "--arch",
+        "cvae",
+        "--depth-condition",
+        "--out",
+        arg(&model),
+        "--epochs-tp1",
+        "1",
+        "--epochs-tp2",
+        "2",
+        "--latent-dim",
+        "16",
+        "--quiet",
+    ]);
+    let target = &input["targets"][2];
+    let bbox: Vec<String> = target["box"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.to_string())
+        .collect();
+    let scene = dir.path().join("scene.json");
+    std::fs::write(
+        &scene,
+        json!({"obstacles": target["obstacles"]}).to_string(),
+    )
+    .unwrap();
+    let o = dpmp_ok(&[
+        "plan",
+        "--model",
+        arg(&model),
+        "--image",
+        arg(&example().join(target["image"].as_str().unwrap())),
+        "--box",
+        &bbox.join(","),
+        "--mask-applied",
+        "--depth",
+        arg(&example().join(target["depth"].as_str().unwrap())),
+        "--scene",
+        arg(&scene),
+    ]);
+    let answer: Value = serde_json::from_slice(&o.stdout).unwrap();
+    let status = answer["status"].as_str().unwrap();
+    assert!(["optimal", "infeasible", "max_iterations"].contains(&status));
+    assert_eq!(answer["target"]["source"], "depth");
+    for p in answer["trajectory"]["points"].as_array().unwrap() {
+        for (q, l) in p["positions"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .zip(robot.limits())
+        {
+            let q = q.as_f64().unwrap();
+            assert!(q >= l.lower - 1e-6 && q <= l.upper + 1e-6);
+        }
+    }
+
+    // eval reads the imported dataset (no ground-truth berry positions).
+    let o = dpmp_ok(&[
+        "eval",
+        "--model",
+        arg(&model),
+        "--data",
+        arg(&data),
+        "--split",
+        "all",
+        "--format",
+        "json",
+        "--out",
+        arg(&dir.path().join("eval")),
+    ]);
+    let report: Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(report["plan_targets"], 6);
+    assert!(report.get("target_position_error_m").is_none());
+}
+
+/// A copy of the example's manifest with `edit` applied, in `dir`.
+fn edited_manifest(dir: &Path, edit: impl Fn(&mut Value)) -> PathBuf {
+    let mut manifest = read_json(&example().join("manifest.json"));
+    // Paths stay relative to the example folder.
+    for t in manifest["targets"].as_array_mut().unwrap() {
+        for key in ["image", "depth"] {
+            t[key] = json!(example().join(t[key].as_str().unwrap()));
+        }
+        for d in t["demos"].as_array_mut().unwrap() {
+            *d = json!(example().join(d.as_str().unwrap()));
+        }
+    }
+    edit(&mut manifest);
+    let path = dir.join("manifest.json");
+    std::fs::write(&path, manifest.to_string()).unwrap();
+    path
+}
+
+/// A change to the example's manifest.
+type Edit = Box<dyn Fn(&mut Value)>;
+
+#[test]
+fn bad_manifests_name_every_bad_target_and_write_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let no_joint5 = dir.path().join("no_joint5.csv");
+    let good = std::fs::read_to_string(example().join("demos/plant0-berry0/0.csv")).unwrap();
+    std::fs::write(&no_joint5, good.replacen("panda_joint5", "j5", 1)).unwrap();
+    let cases: Vec<(&str, Edit, Vec<&str>)> = vec![
+        (
+            "empty",
+            Box::new(|m| m["targets"] = json!([])),
+            vec!["targets: empty"],
+        ),
+        (
+            "duplicate",
+            Box::new(|m| m["targets"][1]["id"] = m["targets"][0]["id"].clone()),
+            vec!["\"plant0-berry0\" appears twice"],
+        ),
+        (
+            "several",
+            Box::new(move |m| {
+                m["targets"][0]["image"] = json!("/nonexistent/a.png");
+                m["targets"][3]["box"] = json!([600.0, 400.0, 700.0, 500.0]);
+                m["targets"][4]["demos"][1] = json!(no_joint5.clone());
+            }),
+            vec![
+                "3 of 6 targets are invalid",
+                "(plant0-berry0)",
+                "/nonexistent/a.png",
+                "(plant1-berry1)",
+                "box",
+                "(plant2-berry0)",
+                "no_joint5.csv",
+                "column 'panda_joint5' is missing",
+            ],
+        ),
+        (
+            "unknown",
+            Box::new(|m| m["targets"][0]["colour"] = json!("red")),
+            vec!["targets[0]", "colour"],
+        ),
+        (
+            "neither",
+            Box::new(|m| {
+                m["targets"][5]
+                    .as_object_mut()
+                    .unwrap()
+                    .remove("demos")
+                    .map(|_| ())
+                    .unwrap()
+            }),
+            vec!["(plant2-berry1)", "either demos"],
+        ),
+    ];
+    for (name, edit, expected) in cases {
+        let case = dir.path().join(name);
+        std::fs::create_dir_all(&case).unwrap();
+        let manifest = edited_manifest(&case, edit);
+        let out = case.join("out");
+        let o = dpmp(&[
+            "data",
+            "import",
+            "--manifest",
+            arg(&manifest),
+            "--out",
+            arg(&out),
+        ]);
+        assert!(!o.status.success(), "{name}");
+        let err = stderr(&o);
+        for e in expected {
+            assert!(err.contains(e), "{name}: {e:?} not in {err}");
+        }
+        assert!(err.contains("manifest.json"), "{name}: {err}");
+        let left: Vec<_> = std::fs::read_dir(&case)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(left.len(), 1, "{name}: left {left:?}");
+    }
+}
