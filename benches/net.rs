@@ -3,16 +3,25 @@
 //! default-size cVAE (the shipped `models/default` when present, else a
 //! freshly initialised network of the same size). Target: <= 10 ms.
 //! Also one tp1 training step (batch 5), and the whole plan pipeline
-//! (`dpmp::plan`) on a generated plant without and with its aligned depth
-//! image, same run (`cargo bench --bench net -- plan`).
+//! (`dpmp::plan`) on generated plants, same run (`cargo bench --bench net --
+//! plan`): the box-only `models/rgb-only` without and with the aligned
+//! depth image (what depth itself costs), and the depth-conditioned
+//! `models/default` with depth.
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use dpmp::net::{Arch, Model, ModelConfig, Network};
 use std::hint::black_box;
 use std::path::Path;
 
+/// The shipped default model (depth-conditioned).
 fn model() -> Model {
-    let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("models/default");
+    model_at("models/default")
+}
+
+/// A shipped model (`dir` relative to the repository), or a freshly
+/// initialised default-size cVAE when it is absent.
+fn model_at(dir: &str) -> Model {
+    let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join(dir);
     if shipped.join("model.safetensors").exists() {
         if let Ok(model) = Model::load(&shipped) {
             return model;
@@ -92,7 +101,8 @@ fn plan(c: &mut Criterion) {
     use dpmp::synth::settings::SynthSettings;
     use std::sync::Arc;
     let robot = Arc::new(Robot::panda().expect("panda"));
-    let model = Arc::new(model());
+    let box_only = Arc::new(model_at("models/rgb-only"));
+    let depth_model = Arc::new(model());
     let settings = SynthSettings::new(PLAN_PLANTS, 1);
     let generator = Generator::new(settings, (*robot).clone()).expect("generator");
     let plants: Vec<_> = (0..PLAN_PLANTS)
@@ -120,7 +130,7 @@ fn plan(c: &mut Criterion) {
             (jpeg, depth, record.bbox, request)
         })
         .collect();
-    let run = |with_depth: bool| {
+    let run = |model: &Arc<Model>, with_depth: bool| {
         for (jpeg, depth, bbox, request) in &plants {
             let image = image::load_from_memory(jpeg).expect("decode");
             let target = if with_depth {
@@ -139,14 +149,19 @@ fn plan(c: &mut Criterion) {
                 request: request.clone(),
             };
             black_box(
-                predict_and_optimize(&model, &robot, input, &Default::default()).expect("plan"),
+                predict_and_optimize(model, &robot, input, &Default::default()).expect("plan"),
             );
         }
     };
     let mut group = c.benchmark_group("plan");
     group.sample_size(10);
-    group.bench_function("without_depth_10_plants", |b| b.iter(|| run(false)));
-    group.bench_function("with_depth_10_plants", |b| b.iter(|| run(true)));
+    group.bench_function("without_depth_10_plants", |b| {
+        b.iter(|| run(&box_only, false))
+    });
+    group.bench_function("with_depth_10_plants", |b| b.iter(|| run(&box_only, true)));
+    group.bench_function("depth_model_10_plants", |b| {
+        b.iter(|| run(&depth_model, true))
+    });
     group.finish();
 }
 

@@ -299,3 +299,29 @@ fn plan_refuses_a_model_for_another_robot_and_finds_the_model_through_the_enviro
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("no-model-here"), "{err}");
 }
+
+#[test]
+fn without_depth_the_box_only_model_plans_and_the_default_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let (data, record) = one_plant(dir.path());
+    let mut args = plan_args(dir.path(), &data, &record);
+    args.truncate(args.len() - 2); // no --depth
+    let rgb_only = Path::new(env!("CARGO_MANIFEST_DIR")).join("models/rgb-only");
+    let mut box_only = args.clone();
+    box_only.extend(["--model".into(), rgb_only.display().to_string()]);
+    let o = dpmp(&box_only.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let answer: Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(answer.get("target").is_none());
+    assert_eq!(answer["prior"]["mean"].as_array().unwrap().len(), 150);
+
+    let mut default = args.clone();
+    default.extend(["--model".into(), default_model().display().to_string()]);
+    let o = dpmp(&default.iter().map(String::as_str).collect::<Vec<_>>());
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("depth") && err.contains("models/rgb-only"),
+        "{err}"
+    );
+}
