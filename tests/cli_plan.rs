@@ -284,7 +284,7 @@ fn plan_refuses_a_model_for_another_robot_and_finds_the_model_through_the_enviro
     assert_eq!(o.status.code(), Some(2));
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(
-        err.contains("trained for another robot") && err.contains("panda_hand"),
+        err.contains("is for another robot") && err.contains("panda_hand"),
         "{err}"
     );
 

@@ -117,6 +117,28 @@ fn the_worked_example_imports_trains_and_plans() {
         );
     }
 
+    // The dataset records its robot: training for another one is refused.
+    let urdf = Path::new(env!("CARGO_MANIFEST_DIR")).join("models/panda/panda.urdf");
+    let o = dpmp(&[
+        "train",
+        "--data",
+        arg(&data),
+        "--arch",
+        "cvae",
+        "--out",
+        arg(&dir.path().join("hand-model")),
+        "--robot",
+        arg(&urdf),
+        "--tip",
+        "panda_hand",
+    ]);
+    assert!(!o.status.success());
+    let err = stderr(&o);
+    assert!(
+        err.contains("dataset") && err.contains("is for another robot"),
+        "{err}"
+    );
+
     // Train a tiny depth-conditioned model for a few steps and plan with it.
     let model = dir.path().join("model");
     dpmp_ok(&[

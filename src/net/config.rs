@@ -277,11 +277,10 @@ impl ModelConfig {
     /// without a record: the shipped Panda); otherwise an error (field
     /// `robot`) saying which robot it was trained for.
     pub fn check_robot(&self, robot: &crate::robot::Robot) -> Result<()> {
+        let what = format!("model '{}'", self.name);
         match &self.robot {
-            Some(identity) => identity.check(robot, &self.name),
-            None => crate::robot::Robot::panda()?
-                .identity()
-                .check(robot, &self.name),
+            Some(identity) => identity.check(robot, &what),
+            None => crate::robot::Robot::panda()?.identity().check(robot, &what),
         }
     }
 

@@ -159,8 +159,8 @@ pub struct RobotIdentity {
 
 impl RobotIdentity {
     /// `Ok` when `robot` is this robot; otherwise an error (field `robot`)
-    /// saying what differs, for a model called `model`.
-    pub fn check(&self, robot: &Robot, model: &str) -> Result<()> {
+    /// saying what differs, for `what` (e.g. `model 'cvae-depth'`).
+    pub fn check(&self, robot: &Robot, what: &str) -> Result<()> {
         let other = robot.identity();
         let differs = if self.joint_names != other.joint_names {
             format!("joints {:?}, not {:?}", self.joint_names, other.joint_names)
@@ -180,7 +180,7 @@ impl RobotIdentity {
         };
         Err(Error::invalid(
             "robot",
-            format!("model '{model}' was trained for another robot: {differs}; load the robot it was trained for (--robot) or a model trained for this one"),
+            format!("{what} is for another robot: {differs}; load that robot (--robot) or use one made for this robot"),
         ))
     }
 }
@@ -413,25 +413,28 @@ mod tests {
         let panda = Robot::panda().unwrap();
         let identity = panda.identity();
         assert_eq!(identity.urdf_sha256.len(), 64);
-        assert!(identity.check(&panda, "m").is_ok());
+        assert!(identity.check(&panda, "model 'm'").is_ok());
         // The same URDF text loaded again: the same robot.
         let again = load(PANDA_URDF, "panda_tcp");
-        assert!(identity.check(&again, "m").is_ok());
+        assert!(identity.check(&again, "model 'm'").is_ok());
         // Other joints.
         let renamed = PANDA_URDF.replace("\"panda_joint7\"", "\"wrist\"");
         let short = load(&renamed, "panda_tcp");
-        let e = identity.check(&short, "m").unwrap_err();
+        let e = identity.check(&short, "model 'm'").unwrap_err();
         assert_eq!(e.field(), Some("robot"));
         assert!(e.to_string().contains("joints"), "{e}");
         // Same chain, another tip: told the tip.
         let hand = load(PANDA_URDF, "panda_hand");
-        let e = identity.check(&hand, "m").unwrap_err().to_string();
+        let e = identity.check(&hand, "model 'm'").unwrap_err().to_string();
         assert!(e.contains("panda_hand") && e.contains("model 'm'"), "{e}");
         // An edited URDF (another link length): told the hash.
         let edited = PANDA_URDF.replacen("0.333", "0.343", 1);
         assert_ne!(edited, PANDA_URDF);
         let longer = load(&edited, "panda_tcp");
-        let e = identity.check(&longer, "m").unwrap_err().to_string();
+        let e = identity
+            .check(&longer, "model 'm'")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("SHA-256"), "{e}");
     }
 

@@ -45,6 +45,9 @@ pub struct Dataset {
     pub promp: PrompConfig,
     /// The camera that took the images (intrinsics and gripper mount).
     pub camera: crate::perception::CameraModel,
+    /// The robot of the demonstrations, when the dataset records it
+    /// (imported datasets; generated ones are the shipped Panda's).
+    pub robot: Option<crate::robot::RobotIdentity>,
     /// The loaded samples, in manifest split order.
     pub samples: Vec<Sample>,
 }
@@ -73,6 +76,7 @@ pub fn load_split(dir: &Path, split: &str, preprocess: &PreprocessConfig) -> Res
         manifest_sha256,
         promp: manifest.promp.clone(),
         camera: manifest.camera_model(),
+        robot: manifest.robot.clone(),
         samples,
     })
 }

@@ -289,6 +289,10 @@ pub fn train_for(settings: &TrainSettings, robot: &crate::robot::Robot) -> Resul
     if train_set.samples.is_empty() {
         return Err(Error::invalid("data", "the train split is empty"));
     }
+    if let Some(identity) = &train_set.robot {
+        let name = format!("dataset {}", settings.data.display());
+        identity.check(robot, &name)?;
+    }
     let mut config = build_config(settings, &train_set, val_set.samples.len())?;
     if config.n_joints != robot.dof() {
         return Err(Error::invalid(
