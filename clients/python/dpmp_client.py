@@ -1,0 +1,125 @@
+"""A small client for the dPMP trajectory service (standard library only).
+
+    from dpmp_client import Client, DpmpError
+
+    dpmp = Client("http://127.0.0.1:8080")            # token=... when the service has one
+    answer = dpmp.optimize(request)                    # the /v1/optimize request as a dict
+    plan = dpmp.plan("plant.png", [392.1, 80.0, 424.4, 122.8],
+                     depth_path="plant_depth.png", mask_applied=True,
+                     obstacles=[...], clearance_m=0.02)
+    print(plan["status"], plan["target"]["goal"], len(plan["trajectory"]["points"]))
+
+Every answer is the service's JSON as a dict (see api/openapi.yaml). A
+refused request raises DpmpError with the server's `code`, `message` and
+`field` (the offending input) and the HTTP status.
+"""
+
+import base64
+import json
+import urllib.error
+import urllib.request
+
+__all__ = ["Client", "DpmpError", "optimize", "plan"]
+
+DEFAULT_URL = "http://127.0.0.1:8080"
+
+
+class DpmpError(Exception):
+    """A request the service refused: HTTP `status`, and its `code`,
+    `message` and `field` (None when the error names no field)."""
+
+    def __init__(self, status, code, message, field=None):
+        super().__init__(f"{status} {code}: {message}" + (f" (field {field})" if field else ""))
+        self.status = status
+        self.code = code
+        self.message = message
+        self.field = field
+
+
+class Client:
+    """The service at `base_url`; `token` is the bearer token, if any;
+    `timeout` in seconds per request."""
+
+    def __init__(self, base_url=DEFAULT_URL, token=None, timeout=60.0):
+        self.base_url = base_url.rstrip("/")
+        self.token = token
+        self.timeout = timeout
+
+    def optimize(self, request):
+        """POST /v1/optimize: the Mahalanobis-closest feasible trajectory for
+        `request` (prior, obstacles, start, goal, ...)."""
+        return self._post("/v1/optimize", request)
+
+    def plan(self, image_path, box, depth_path=None, **fields):
+        """POST /v1/plan: the network's prior for the berry in `box`
+        ([x1, y1, x2, y2] px) of the image, then the optimised trajectory.
+        With `depth_path` (aligned 16-bit PNG) the berry's 3-D position
+        becomes the goal. Other request fields (mask_applied, obstacles,
+        clearance_m, depth_scale_m, target_position, goal_standoff_m, ...)
+        go in as keyword arguments."""
+        body = dict(fields)
+        body["image_base64"] = _file_base64(image_path)
+        body["target_box"] = [float(v) for v in box]
+        if depth_path is not None:
+            body["depth_base64"] = _file_base64(depth_path)
+        return self._post("/v1/plan", body)
+
+    def robot(self):
+        """GET /v1/robot: joints, limits, home, collision shapes."""
+        return self._get("/v1/robot")
+
+    def models(self):
+        """GET /v1/models: the loaded network and its config."""
+        return self._get("/v1/models")
+
+    def ready(self):
+        """Whether GET /readyz answers 200."""
+        try:
+            self._get("/readyz")
+            return True
+        except (DpmpError, OSError):
+            return False
+
+    def _get(self, path):
+        return self._send(urllib.request.Request(self.base_url + path, method="GET"))
+
+    def _post(self, path, body):
+        data = json.dumps(body).encode("utf-8")
+        request = urllib.request.Request(self.base_url + path, data=data, method="POST")
+        request.add_header("Content-Type", "application/json")
+        return self._send(request)
+
+    def _send(self, request):
+        if self.token:
+            request.add_header("Authorization", f"Bearer {self.token}")
+        try:
+            with urllib.request.urlopen(request, timeout=self.timeout) as response:
+                text = response.read().decode("utf-8")
+                return json.loads(text) if text.strip().startswith(("{", "[")) else text
+        except urllib.error.HTTPError as e:
+            raise _error_of(e) from None
+
+
+def _error_of(http_error):
+    """The DpmpError of an HTTP error answer (`{"error": {...}}`)."""
+    body = http_error.read().decode("utf-8", errors="replace")
+    try:
+        error = json.loads(body)["error"]
+        return DpmpError(http_error.code, error.get("code"), error.get("message"), error.get("field"))
+    except (ValueError, KeyError, TypeError):
+        return DpmpError(http_error.code, "http_error", body.strip() or http_error.reason)
+
+
+def _file_base64(path):
+    with open(path, "rb") as f:
+        return base64.b64encode(f.read()).decode("ascii")
+
+
+def optimize(request, base_url=DEFAULT_URL, token=None):
+    """`Client(base_url, token).optimize(request)`."""
+    return Client(base_url, token).optimize(request)
+
+
+def plan(image_path, box, depth_path=None, base_url=DEFAULT_URL, token=None, **fields):
+    """`Client(base_url, token).plan(image_path, box, depth_path, **fields)`."""
+    return Client(base_url, token).plan(image_path, box, depth_path, **fields)
