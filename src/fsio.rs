@@ -1,7 +1,7 @@
 //! Files written whole or not at all: every output file of dpmp (datasets,
 //! checkpoints, annotations, problem files, reports) goes through
 //! [`write_atomic`], so a crash or a full disk never leaves a partial file
-//! under the final name.
+//! under the final name. [`read_json`] is the matching reader.
 
 use crate::{Error, Result};
 use std::path::{Path, PathBuf};
@@ -24,6 +24,13 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
         let _ = std::fs::remove_file(&tmp);
         Error::file(path, format!("cannot write: {e}"))
     })
+}
+
+/// Read and parse a JSON file, naming the file (and serde's location) on
+/// error.
+pub fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::file(path, e.to_string()))?;
+    serde_json::from_str(&text).map_err(|e| Error::file(path, format!("malformed JSON: {e}")))
 }
 
 #[cfg(test)]

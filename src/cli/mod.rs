@@ -123,13 +123,7 @@ pub(crate) fn write_stdout(text: &str) -> crate::Result<()> {
     }
 }
 
-/// Read and parse a JSON file, naming the file (and the serde location) on error.
-pub fn read_json<T: serde::de::DeserializeOwned>(path: &std::path::Path) -> crate::Result<T> {
-    let text =
-        std::fs::read_to_string(path).map_err(|e| crate::Error::file(path, e.to_string()))?;
-    serde_json::from_str(&text)
-        .map_err(|e| crate::Error::file(path, format!("malformed JSON: {e}")))
-}
+pub use crate::fsio::read_json;
 
 /// Rename the field of a validation error to the CLI flag that set it
 /// (`n_samples` -> `--n-samples`).

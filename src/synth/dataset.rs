@@ -15,6 +15,7 @@
 //! loaders validate shapes and finiteness and name the file and field.
 
 use crate::error::{ensure_finite, ensure_len};
+use crate::fsio::read_json;
 use crate::promp::annotation::JointAnnotation;
 use crate::promp::PrompConfig;
 use crate::scene::SceneFile;
@@ -416,11 +417,6 @@ fn relative_path(p: &str) -> Result<PathBuf> {
             format!("{p:?} must be a relative path inside the dataset directory"),
         ))
     }
-}
-
-fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::file(path, e.to_string()))?;
-    serde_json::from_str(&text).map_err(|e| Error::file(path, format!("malformed JSON: {e}")))
 }
 
 /// Read and validate `DIR/manifest.json`.

@@ -420,7 +420,7 @@ impl<'a> Run<'a> {
             epochs_run: 0,
         };
         if resumed {
-            let state: ResumeState = crate::cli::read_json(&state_path)?;
+            let state: ResumeState = crate::fsio::read_json(&state_path)?;
             if state.fingerprint != fingerprint {
                 return Err(Error::invalid(
                     "resume",
