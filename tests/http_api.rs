@@ -142,6 +142,80 @@ fn optimize_answers_a_verified_trajectory() {
 }
 
 #[test]
+fn the_ros2_format_is_the_message_with_accelerations_and_the_same_motion() {
+    let server = start(test_config());
+    let c = client();
+    let url = server.url("/v1/optimize");
+    let request = typical_request(1);
+    let (_, dpmp) = post_json(&c, &url, request.to_string());
+    let mut ros = request.clone();
+    ros["trajectory_format"] = json!("ros2");
+    let (s, body) = post_json(&c, &url, ros.to_string());
+    assert_eq!(s, 200, "{body}");
+    // The schema of the message (additional properties refused), via the
+    // response's oneOf: exactly the ROS 2 shape matches.
+    let spec = openapi();
+    assert_valid(&spec, "post", "/v1/optimize", s, &body);
+    let trajectory = &body["trajectory"];
+    assert_eq!(
+        trajectory["header"]["stamp"],
+        json!({"sec": 0, "nanosec": 0})
+    );
+    assert_eq!(trajectory["header"]["frame_id"], "");
+    assert_eq!(trajectory["joint_names"], dpmp["trajectory"]["joint_names"]);
+    assert_eq!(body["weights"], dpmp["weights"]);
+    let points = trajectory["points"].as_array().unwrap();
+    let plain = dpmp["trajectory"]["points"].as_array().unwrap();
+    assert_eq!(points.len(), plain.len());
+    let seconds = |p: &Value| {
+        p["time_from_start"]["sec"].as_f64().unwrap()
+            + p["time_from_start"]["nanosec"].as_f64().unwrap() * 1e-9
+    };
+    let numbers = |v: &Value| -> Vec<f64> {
+        v.as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect()
+    };
+    for (p, q) in points.iter().zip(plain) {
+        assert!((seconds(p) - q["time_from_start"].as_f64().unwrap()).abs() <= 5e-10);
+        assert_eq!(p["positions"], q["positions"]);
+        assert_eq!(p["velocities"], q["velocities"]);
+        assert_eq!(p["effort"], json!([]));
+        assert!(q.get("accelerations").is_none());
+    }
+    // Accelerations: central differences of the velocities (dt = 4/149 s).
+    for k in 1..points.len() - 1 {
+        let dt = seconds(&points[k + 1]) - seconds(&points[k - 1]);
+        let (before, after) = (
+            numbers(&points[k - 1]["velocities"]),
+            numbers(&points[k + 1]["velocities"]),
+        );
+        let acc = numbers(&points[k]["accelerations"]);
+        for j in 0..7 {
+            let fd = (after[j] - before[j]) / dt;
+            assert!(
+                (fd - acc[j]).abs() < 2e-3 * (1.0 + acc[j].abs()),
+                "point {k} joint {j}: {fd} vs {}",
+                acc[j]
+            );
+        }
+    }
+    // An unknown format is refused, naming the field.
+    ros["trajectory_format"] = json!("ros1");
+    let (s, body) = post_json(&c, &url, ros.to_string());
+    assert_eq!(s, 422, "{body}");
+    assert!(
+        body["error"]["field"]
+            .as_str()
+            .unwrap_or("")
+            .contains("trajectory_format"),
+        "{body}"
+    );
+}
+
+#[test]
 fn robot_and_models_describe_what_is_loaded() {
     let server = start(test_config());
     let c = client();

@@ -137,6 +137,7 @@ pub fn typical_request(
         joint_limit_margin_rad: 0.0,
         samples: 0,
         options: SolverOptions::default(),
+        trajectory_format: Default::default(),
     })
 }
 

@@ -35,6 +35,8 @@ pub struct Problem {
     pub(crate) goal: Option<Goal>,
     pub(crate) options: SolverOptions,
     pub(crate) duration: f64,
+    /// How answers write the trajectory.
+    pub(crate) trajectory_format: super::report::TrajectoryFormat,
     pub(crate) n_extra_samples: usize,
     pub(crate) warnings: Vec<String>,
 }

@@ -17,24 +17,145 @@ pub enum Status {
     MaxIterations,
 }
 
-/// `trajectory_msgs/JointTrajectory` in JSON.
-#[derive(Clone, Debug, Serialize, PartialEq)]
+/// How a trajectory is written in JSON (the request's `trajectory_format`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TrajectoryFormat {
+    /// `{joint_names, points: [{positions, velocities, time_from_start: s}]}`.
+    #[default]
+    Dpmp,
+    /// Exactly as ROS 2 serialises `trajectory_msgs/msg/JointTrajectory`:
+    /// `header`, `joint_names`, points with `positions`, `velocities`,
+    /// `accelerations`, `effort: []` and `time_from_start: {sec, nanosec}`.
+    Ros2,
+}
+
+impl TrajectoryFormat {
+    /// Whether this is the default (`dpmp`), which requests leave out.
+    pub fn is_default(&self) -> bool {
+        *self == TrajectoryFormat::Dpmp
+    }
+}
+
+/// A joint trajectory, shaped like ROS `trajectory_msgs/JointTrajectory`;
+/// written as [`TrajectoryFormat`] says.
+#[derive(Clone, Debug, PartialEq)]
 pub struct JointTrajectory {
     /// Actuated joints, base to tip.
     pub joint_names: Vec<String>,
     /// One point per phase of the request's sampling.
     pub points: Vec<TrajectoryPoint>,
+    /// How it is written.
+    pub format: TrajectoryFormat,
 }
 
-/// `trajectory_msgs/JointTrajectoryPoint` in JSON.
-#[derive(Clone, Debug, Serialize, PartialEq)]
+/// One point of a [`JointTrajectory`].
+#[derive(Clone, Debug, PartialEq)]
 pub struct TrajectoryPoint {
     /// Joint positions (rad).
     pub positions: Vec<f64>,
     /// Joint velocities (rad/s).
     pub velocities: Vec<f64>,
+    /// Joint accelerations (rad/s²); written in the ROS 2 format only.
+    pub accelerations: Vec<f64>,
     /// Seconds from the start of the motion.
     pub time_from_start: f64,
+}
+
+/// `builtin_interfaces/Duration` (and `Time`): whole seconds and the
+/// nanoseconds beyond them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub struct RosDuration {
+    /// Whole seconds.
+    pub sec: i32,
+    /// Nanoseconds, `0..1e9`.
+    pub nanosec: u32,
+}
+
+impl RosDuration {
+    /// The duration of `seconds` (>= 0), rounded to the nanosecond.
+    pub fn from_seconds(seconds: f64) -> RosDuration {
+        let total = (seconds.max(0.0) * 1e9).round() as u64;
+        RosDuration {
+            sec: (total / 1_000_000_000) as i32,
+            nanosec: (total % 1_000_000_000) as u32,
+        }
+    }
+}
+
+#[derive(Serialize)]
+struct DpmpPoint<'a> {
+    positions: &'a [f64],
+    velocities: &'a [f64],
+    time_from_start: f64,
+}
+
+#[derive(Serialize)]
+struct DpmpTrajectory<'a> {
+    joint_names: &'a [String],
+    points: Vec<DpmpPoint<'a>>,
+}
+
+#[derive(Serialize)]
+struct Ros2Header {
+    stamp: RosDuration,
+    frame_id: &'static str,
+}
+
+#[derive(Serialize)]
+struct Ros2Point<'a> {
+    positions: &'a [f64],
+    velocities: &'a [f64],
+    accelerations: &'a [f64],
+    effort: [f64; 0],
+    time_from_start: RosDuration,
+}
+
+#[derive(Serialize)]
+struct Ros2Trajectory<'a> {
+    header: Ros2Header,
+    joint_names: &'a [String],
+    points: Vec<Ros2Point<'a>>,
+}
+
+impl Serialize for JointTrajectory {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        match self.format {
+            TrajectoryFormat::Dpmp => DpmpTrajectory {
+                joint_names: &self.joint_names,
+                points: self
+                    .points
+                    .iter()
+                    .map(|p| DpmpPoint {
+                        positions: &p.positions,
+                        velocities: &p.velocities,
+                        time_from_start: p.time_from_start,
+                    })
+                    .collect(),
+            }
+            .serialize(serializer),
+            TrajectoryFormat::Ros2 => Ros2Trajectory {
+                // A zero stamp: "start when received" for ROS 2 controllers.
+                header: Ros2Header {
+                    stamp: RosDuration { sec: 0, nanosec: 0 },
+                    frame_id: "",
+                },
+                joint_names: &self.joint_names,
+                points: self
+                    .points
+                    .iter()
+                    .map(|p| Ros2Point {
+                        positions: &p.positions,
+                        velocities: &p.velocities,
+                        accelerations: &p.accelerations,
+                        effort: [],
+                        time_from_start: RosDuration::from_seconds(p.time_from_start),
+                    })
+                    .collect(),
+            }
+            .serialize(serializer),
+        }
+    }
 }
 
 /// The closest robot-obstacle pair over the verified trajectory.

@@ -199,15 +199,21 @@ impl Problem {
             .phases()
             .iter()
             .enumerate()
-            .map(|(p, z)| TrajectoryPoint {
-                positions: q.row(p).iter().cloned().collect(),
-                velocities: qd.row(p).iter().cloned().collect(),
-                time_from_start: z * self.duration,
+            .map(|(p, &z)| {
+                let qdd = self.basis.second_derivative_row_at(z).transpose() * &wm
+                    / (self.duration * self.duration);
+                TrajectoryPoint {
+                    positions: q.row(p).iter().cloned().collect(),
+                    velocities: qd.row(p).iter().cloned().collect(),
+                    accelerations: qdd.iter().cloned().collect(),
+                    time_from_start: z * self.duration,
+                }
             })
             .collect();
         JointTrajectory {
             joint_names: self.robot.joint_names().to_vec(),
             points,
+            format: self.trajectory_format,
         }
     }
 }

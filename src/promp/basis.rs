@@ -97,6 +97,12 @@ impl Basis {
         psi_and_derivative(&self.config, z).1
     }
 
+    /// `d² psi / dz²` at any phase (divide by the duration squared for
+    /// accelerations).
+    pub fn second_derivative_row_at(&self, z: f64) -> DVector<f64> {
+        psi_second_derivative(&self.config, z)
+    }
+
     /// The same basis resampled on `n_samples` phases (dense verification).
     pub fn resampled(&self, n_samples: usize) -> Result<Basis> {
         Basis::new(&PrompConfig {
@@ -129,6 +135,23 @@ fn psi_and_derivative(config: &PrompConfig, z: f64) -> (DVector<f64>, DVector<f6
     (psi, dpsi)
 }
 
+/// `psi''(z)`: with `g_i = -(z - c_i) / h` (so `b_i' = g_i b_i`, `g_i' = -1/h`)
+/// and `psi_i' = psi_i (g_i - ḡ)`, `ḡ = Σ psi_j g_j`, differentiating once
+/// more gives `psi_i'' = psi_i' (g_i - ḡ) - psi_i Σ_j psi_j' g_j`.
+fn psi_second_derivative(config: &PrompConfig, z: f64) -> DVector<f64> {
+    let (psi, dpsi) = psi_and_derivative(config, z);
+    let nb = config.n_basis;
+    let g: Vec<f64> = (0..nb)
+        .map(|i| -(z - i as f64 / (nb - 1) as f64) / config.width)
+        .collect();
+    let mean_g: f64 = psi.iter().zip(&g).map(|(p, g)| p * g).sum();
+    let dmean_g: f64 = dpsi.iter().zip(&g).map(|(d, g)| d * g).sum();
+    DVector::from_iterator(
+        nb,
+        (0..nb).map(|i| dpsi[i] * (g[i] - mean_g) - psi[i] * dmean_g),
+    )
+}
+
 /// `(PhiᵀPhi + rI)⁻¹ Phiᵀ`, computed from the SVD of `Phi` as
 /// `V diag(s / (s² + r)) Uᵀ` so that the basis' poor conditioning (width
 /// 0.07 overlaps heavily: cond(PhiᵀPhi) ~ 5e8) is not squared.
@@ -147,6 +170,21 @@ mod tests {
 
     fn basis() -> Basis {
         Basis::new(&PrompConfig::default()).unwrap()
+    }
+
+    #[test]
+    fn the_second_derivative_matches_finite_differences_of_the_first() {
+        let b = basis();
+        let step = 1e-6;
+        for k in 0..=40 {
+            let z = k as f64 / 40.0;
+            let fd = (b.derivative_row_at(z + step) - b.derivative_row_at(z - step)) / (2.0 * step);
+            let exact = b.second_derivative_row_at(z);
+            let scale = exact.amax().max(1.0);
+            assert!((fd - &exact).amax() < 1e-5 * scale, "z {z}");
+            // The rows sum to one, so the derivatives sum to zero.
+            assert!(exact.sum().abs() < 1e-9 * scale);
+        }
     }
 
     #[test]

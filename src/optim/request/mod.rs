@@ -3,6 +3,7 @@
 
 mod validate;
 
+pub use super::report::TrajectoryFormat;
 use crate::promp::annotation::JointAnnotation;
 use crate::promp::PrompConfig;
 use crate::scene::Obstacle;
@@ -54,6 +55,9 @@ pub struct OptimizeRequest {
     /// Solver knobs.
     #[serde(default)]
     pub options: SolverOptions,
+    /// How the answer writes the trajectory (`dpmp` or `ros2`).
+    #[serde(default, skip_serializing_if = "TrajectoryFormat::is_default")]
+    pub trajectory_format: TrajectoryFormat,
 }
 
 fn default_duration() -> f64 {

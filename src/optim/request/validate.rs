@@ -68,6 +68,7 @@ impl OptimizeRequest {
             goal: self.goal.clone(),
             options: self.options.clone(),
             duration: self.duration_s,
+            trajectory_format: self.trajectory_format,
             n_extra_samples: self.samples,
             warnings,
         })
