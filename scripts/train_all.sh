@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Train every dPMP variant (Direct, AE, VAE, cVAE, each AE/VAE/cVAE also with
 # latent tuning) on one generated dataset with the same settings, evaluate
-# each on the test split, print the comparison table, and copy the chosen
-# default (l-dPMP-cVAE unless DEFAULT says otherwise) to models/default.
+# each on the test split, print the comparison table, and (when DEFAULT names
+# one of them) copy it to models/default. The shipped default is the
+# depth-conditioned cVAE trained by the README's command, not one of these.
 #
 # A latent-tuning variant NAME-lt is the finished NAME run (tp1 + tp2)
 # extended by tp3 (`--latent-tuning --resume`): bit-identical to training it
@@ -12,7 +13,8 @@
 # Usage:
 #   scripts/train_all.sh [DATA_DIR] [SEED]
 # Environment: EPOCHS_TP1, EPOCHS_TP2, EPOCHS_TP3, BATCH, LR, ALPHA, PATIENCE,
-# DEFAULT (a model name below, e.g. cvae-lt), OUT_ROOT (default models/variants),
+# DEFAULT (a model name below to install as models/default; default none),
+# OUT_ROOT (default models/variants),
 # MODELS (space-separated subset and order, default "cvae cvae-lt ae ae-lt
 # vae vae-lt direct"), FORCE=1 (retrain models whose evaluation exists),
 # BIN (the dpmp binary; default: build and use target/release/dpmp).
@@ -29,7 +31,7 @@ BATCH="${BATCH:-5}"
 LR="${LR:-1e-4}"
 ALPHA="${ALPHA:-1.0}"
 PATIENCE="${PATIENCE:-10}"
-DEFAULT="${DEFAULT:-cvae-lt}"
+DEFAULT="${DEFAULT:-}"
 MODELS="${MODELS:-cvae cvae-lt ae ae-lt vae vae-lt direct}"
 ALL="direct ae ae-lt vae vae-lt cvae cvae-lt"
 
@@ -96,7 +98,7 @@ print(f"| {sys.argv[3]} | {r['eq7_total']:.3e} | {t3['mean']['position_m']:.4f} 
 PY
 done
 
-if [ -f "$OUT_ROOT/$DEFAULT.eval.json" ]; then
+if [ -n "$DEFAULT" ] && [ -f "$OUT_ROOT/$DEFAULT.eval.json" ]; then
   rm -rf models/default.tmp
   mkdir -p models/default.tmp
   cp "$OUT_ROOT/$DEFAULT/model.safetensors" "$OUT_ROOT/$DEFAULT/config.json" \
