@@ -320,3 +320,46 @@ fn bad_manifests_name_every_bad_target_and_write_nothing() {
         assert_eq!(left.len(), 1, "{name}: left {left:?}");
     }
 }
+
+#[test]
+fn annotation_folders_are_a_prior_source() {
+    // The paper's layout (J1..J7/K.json) beside one's own image: the
+    // record's distribution is the annotation's, decoded.
+    let dir = tempfile::tempdir().unwrap();
+    let annotation = Path::new(env!("CARGO_MANIFEST_DIR")).join("models/priors/example");
+    let manifest = edited_manifest(dir.path(), |m| {
+        let mut t = m["targets"][0].clone();
+        t.as_object_mut().unwrap().remove("demos");
+        t["prior"] = json!({"annotation": annotation, "index": 0});
+        t["duration_s"] = json!(5.0);
+        m["targets"] = json!([t]);
+    });
+    let out = dir.path().join("data");
+    dpmp_ok(&[
+        "data",
+        "import",
+        "--manifest",
+        arg(&manifest),
+        "--out",
+        arg(&out),
+    ]);
+    let record = read_json(&out.join("targets/plant0-berry0.json"));
+    let prior = dpmp::promp::annotation::load_dir(&annotation, 0).unwrap();
+    let mean: Vec<f64> = serde_json::from_value(record["distribution"]["mean"].clone()).unwrap();
+    let diff = mean
+        .iter()
+        .zip(prior.distribution.mean.iter())
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
+    assert!(diff < 1e-12, "{diff}");
+    assert_eq!(record["demos"], json!([]));
+    assert_eq!(record["duration_s"], json!(5.0));
+    // Its final TCP is the prior mean's final configuration through FK.
+    let basis = dpmp::promp::Basis::new(&dpmp::promp::PrompConfig::default()).unwrap();
+    let last = prior.distribution.trajectory_mean(&basis);
+    let q: Vec<f64> = last.row(last.nrows() - 1).iter().copied().collect();
+    let tcp = Robot::panda().unwrap().tcp_pose(&q).translation.vector;
+    let recorded: Vec<f64> =
+        serde_json::from_value(record["final_tcp"]["position"].clone()).unwrap();
+    assert!((tcp - nalgebra::Vector3::from_row_slice(&recorded)).norm() < 1e-12);
+}

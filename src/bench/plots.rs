@@ -5,7 +5,7 @@
 
 use super::report::Report;
 use super::runner::RunRecord;
-use crate::plot::{register_font, temp_path};
+use crate::plot::{register_font, write_via_temp};
 use crate::{Error, Result};
 use plotters::prelude::*;
 use std::path::{Path, PathBuf};
@@ -26,13 +26,7 @@ pub fn write_plots(report: &Report, dir: &Path) -> Result<Vec<PathBuf>> {
     let mut files = Vec::new();
     let mut emit = |name: &str, draw: &dyn Fn(&Path) -> Result<()>| -> Result<()> {
         let path = dir.join(name);
-        let tmp = temp_path(&path);
-        let result = draw(&tmp);
-        if let Err(e) = result {
-            let _ = std::fs::remove_file(&tmp);
-            return Err(e);
-        }
-        std::fs::rename(&tmp, &path).map_err(|e| Error::file(&path, e.to_string()))?;
+        write_via_temp(&path, draw)?;
         files.push(path);
         Ok(())
     };

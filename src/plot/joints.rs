@@ -1,7 +1,7 @@
 //! One panel per joint: mean trajectories over time with optional
 //! `± k sigma` bands and joint-limit lines.
 
-use super::{finish, format_of, plot_error, register_font, temp_path, Format};
+use super::{format_of, plot_error, register_font, write_via_temp, Format};
 use crate::Result;
 use nalgebra::DMatrix;
 use plotters::coord::Shift;
@@ -35,11 +35,11 @@ pub fn joint_panels(
     limits: Option<&[(f64, f64)]>,
 ) -> Result<()> {
     register_font();
-    let tmp = temp_path(path);
     let size = (1400, 900);
-    let drawn = match format_of(path, "out")? {
+    let format = format_of(path, "out")?;
+    write_via_temp(path, |tmp| match format {
         Format::Png => draw(
-            BitMapBackend::new(&tmp, size).into_drawing_area(),
+            BitMapBackend::new(tmp, size).into_drawing_area(),
             title,
             times,
             series,
@@ -48,7 +48,7 @@ pub fn joint_panels(
             path,
         ),
         Format::Svg => draw(
-            SVGBackend::new(&tmp, size).into_drawing_area(),
+            SVGBackend::new(tmp, size).into_drawing_area(),
             title,
             times,
             series,
@@ -56,14 +56,7 @@ pub fn joint_panels(
             limits,
             path,
         ),
-    };
-    match drawn {
-        Ok(()) => finish(&tmp, path),
-        Err(e) => {
-            let _ = std::fs::remove_file(&tmp);
-            Err(e)
-        }
-    }
+    })
 }
 
 fn draw<DB: DrawingBackend>(

@@ -53,17 +53,22 @@ pub fn format_of(path: &Path, field: &str) -> Result<Format> {
 
 /// Temporary sibling path with the same extension (plotters picks the
 /// encoder from it).
-pub(crate) fn temp_path(path: &Path) -> PathBuf {
+fn temp_path(path: &Path) -> PathBuf {
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("png");
     path.with_extension(format!("partial.{ext}"))
 }
 
-/// Rename the finished temporary file onto `path`, removing it on failure.
-pub(crate) fn finish(tmp: &Path, path: &Path) -> Result<()> {
-    std::fs::rename(tmp, path).map_err(|e| {
-        let _ = std::fs::remove_file(tmp);
-        Error::file(path, e.to_string())
-    })
+/// Draw a plot file whole or not at all: `draw` writes a temporary
+/// sibling of `path` (same extension, so plotters picks the encoder), which
+/// is renamed onto `path` when it succeeds and removed when anything fails.
+pub(crate) fn write_via_temp(path: &Path, draw: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
+    let tmp = temp_path(path);
+    let result = draw(&tmp)
+        .and_then(|()| std::fs::rename(&tmp, path).map_err(|e| Error::file(path, e.to_string())));
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
 }
 
 /// Map any plotters error to a file error for `path`.

@@ -137,11 +137,8 @@ fn dist(a: &[f64; 2], b: &[f64; 2]) -> f64 {
 
 /// Scatter plot of the embedding, one colour per label (PNG, atomic).
 pub fn plot_embedding(embedding: &Embedding, title: &str, path: &Path) -> Result<()> {
-    let tmp = path.with_file_name(format!(".embedding.tmp{}.png", std::process::id()));
-    draw(embedding, title, &tmp).map_err(|e| Error::file(path, format!("cannot plot: {e}")))?;
-    std::fs::rename(&tmp, path).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        Error::file(path, e.to_string())
+    crate::plot::write_via_temp(path, |tmp| {
+        draw(embedding, title, tmp).map_err(|e| Error::file(path, format!("cannot plot: {e}")))
     })
 }
 

@@ -96,11 +96,8 @@ fn append_line(path: &Path, line: &str) -> Result<()> {
 /// Draw train (solid) and validation (dashed-looking thin) loss curves per
 /// phase on a log scale to `path` (PNG, written atomically).
 pub fn plot_loss_curves(records: &[EpochRecord], path: &Path) -> Result<()> {
-    let tmp = path.with_file_name(format!(".loss_curves.tmp{}.png", std::process::id()));
-    draw_curves(records, &tmp).map_err(|e| Error::file(path, format!("cannot plot: {e}")))?;
-    std::fs::rename(&tmp, path).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        Error::file(path, e.to_string())
+    crate::plot::write_via_temp(path, |tmp| {
+        draw_curves(records, tmp).map_err(|e| Error::file(path, format!("cannot plot: {e}")))
     })
 }
 
