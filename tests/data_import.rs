@@ -16,6 +16,20 @@ fn example() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/import")
 }
 
+/// `dpmp data import --manifest MANIFEST --out OUT`, which must succeed;
+/// its summary.
+fn import(manifest: &Path, out: &Path) -> Value {
+    let o = dpmp_ok(&[
+        "data",
+        "import",
+        "--manifest",
+        arg(manifest),
+        "--out",
+        arg(out),
+    ]);
+    serde_json::from_slice(&o.stdout).unwrap()
+}
+
 fn read_json(path: &Path) -> Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
@@ -36,15 +50,7 @@ fn the_worked_example_imports_trains_and_plans() {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("data");
     let manifest = example().join("manifest.json");
-    let o = dpmp_ok(&[
-        "data",
-        "import",
-        "--manifest",
-        arg(&manifest),
-        "--out",
-        arg(&data),
-    ]);
-    let summary: Value = serde_json::from_slice(&o.stdout).unwrap();
+    let summary = import(&manifest, &data);
     assert_eq!(
         (
             &summary["targets"],
@@ -101,14 +107,7 @@ fn the_worked_example_imports_trains_and_plans() {
 
     // The same import again: the same bytes.
     let again = dir.path().join("again");
-    dpmp_ok(&[
-        "data",
-        "import",
-        "--manifest",
-        arg(&manifest),
-        "--out",
-        arg(&again),
-    ]);
+    import(&manifest, &again);
     for file in ["manifest.json", "targets/plant1-berry0.json"] {
         assert_eq!(
             std::fs::read(data.join(file)).unwrap(),
@@ -335,14 +334,7 @@ fn annotation_folders_are_a_prior_source() {
         m["targets"] = json!([t]);
     });
     let out = dir.path().join("data");
-    dpmp_ok(&[
-        "data",
-        "import",
-        "--manifest",
-        arg(&manifest),
-        "--out",
-        arg(&out),
-    ]);
+    import(&manifest, &out);
     let record = read_json(&out.join("targets/plant0-berry0.json"));
     let prior = dpmp::promp::annotation::load_dir(&annotation, 0).unwrap();
     let mean: Vec<f64> = serde_json::from_value(record["distribution"]["mean"].clone()).unwrap();
