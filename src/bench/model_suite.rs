@@ -4,13 +4,14 @@
 //! Each target of the split becomes an in-memory problem built like
 //! `dpmp plan` builds its request: the network's prior from the target's
 //! image and box (and the measured depth, for a depth-conditioned model;
-//! [`crate::net::Model::predict_with_depth`]; dataset images already carry
-//! the white box), the target's scene as obstacles, the record's
-//! duration and basis, 2 cm clearance, no start or goal constraint. The
-//! demonstrations' mean final TCP position is kept as
-//! [`Meta::reference_final_tcp`], so the runner reports every method's
-//! final-point TCP error against it ([`super::RunRecord::final_tcp_error_m`];
-//! for `prior-mean` that is the network prior mean's error).
+//! [`crate::net::Model::predict_with_depth`]; generated images already
+//! carry the white box, imported ones say whether they do), the target's
+//! scene as obstacles, the record's duration and basis, 2 cm clearance,
+//! no start or goal constraint. The demonstrations' mean final TCP
+//! position is kept as [`Meta::reference_final_tcp`], so the runner
+//! reports every method's final-point TCP error against it
+//! ([`super::RunRecord::final_tcp_error_m`]; for `prior-mean` that is the
+//! network prior mean's error).
 
 use super::problem_file::{Expect, Meta, ProblemFile};
 use crate::net::Model;
@@ -62,7 +63,12 @@ pub fn target_problem(
 ) -> Result<ProblemFile> {
     let record = load_record(data, entry)?;
     let image = image::DynamicImage::ImageRgb8(load_image(data, entry)?);
-    let prediction = model.predict_with_depth(&image, record.bbox, true, record.target_depth_m)?;
+    let prediction = model.predict_with_depth(
+        &image,
+        record.bbox,
+        entry.mask_applied,
+        record.target_depth_m,
+    )?;
     let request = json!({
         "prior": prior_spec(&prediction.distribution),
         "promp": record.promp,
