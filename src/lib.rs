@@ -40,6 +40,7 @@
 //! - [`bench`] — the offline benchmark runner.
 //! - [`plot`] — shared plotting helpers (plotters).
 //! - [`fsio`] — whole-or-nothing file writes, shared by every writer.
+//! - [`progress`] — progress bars on stderr for long work.
 //!
 //! ## Conventions
 //!
@@ -58,6 +59,7 @@ pub mod optim;
 pub mod perception;
 pub mod plan;
 pub mod plot;
+pub mod progress;
 pub mod promp;
 pub mod robot;
 pub mod scene;

@@ -89,18 +89,6 @@ pub fn run(command: Command) -> crate::Result<()> {
     }
 }
 
-/// A progress bar on stderr for `len` steps of `what` (drawn only on a
-/// terminal).
-pub fn progress_bar(len: u64, what: &str) -> indicatif::ProgressBar {
-    let bar = indicatif::ProgressBar::new(len);
-    if let Ok(style) = indicatif::ProgressStyle::with_template(&format!(
-        "{{bar:40}} {{pos}}/{{len}} {what}  eta {{eta}}"
-    )) {
-        bar.set_style(style);
-    }
-    bar
-}
-
 /// Write `value` as pretty JSON to stdout.
 pub fn print_json<T: serde::Serialize>(value: &T) -> crate::Result<()> {
     let text = serde_json::to_string_pretty(value)

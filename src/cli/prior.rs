@@ -150,7 +150,7 @@ fn fit(args: &FitArgs) -> Result<()> {
     let basis = Basis::new(&config).map_err(crate::cli::as_flag_error)?;
     let robot = args.robot.load()?;
     let paths = demos::demonstration_paths(&args.demos)?;
-    let progress = crate::cli::progress_bar(paths.len() as u64, "reading demonstrations");
+    let progress = crate::progress::bar(true, paths.len() as u64, "demonstrations read");
     let recordings = paths
         .iter()
         .map(|p| {

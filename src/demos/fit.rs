@@ -66,6 +66,14 @@ impl PriorFit {
         d.sort_by(f64::total_cmp);
         d[d.len() / 2]
     }
+
+    /// The largest RMS fit residual of any demonstration (rad).
+    pub fn max_rms_residual(&self) -> f64 {
+        self.demos
+            .iter()
+            .map(|d| d.rms_residual_rad)
+            .fold(0.0, f64::max)
+    }
 }
 
 /// The demonstration's positions at `phases` (each in `[0, 1]`), by cubic

@@ -40,7 +40,6 @@ use crate::{Error, Result};
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use serde::Deserialize;
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 /// The manifest `dpmp data import` reads.
@@ -191,7 +190,9 @@ pub fn import(
             format!("depth_scale_m must be in (0, 0.01] m per unit, got {scale}"),
         ));
     }
-    let groups = group_indices(&manifest, manifest_path)?;
+    check_ids_and_groups(&manifest, manifest_path)?;
+    let group_names = group_names(&manifest);
+    let groups = group_indices(&manifest, &group_names);
     let context = Context {
         base,
         robot,
@@ -201,7 +202,11 @@ pub fn import(
     };
     let mut prepared = Vec::new();
     let mut problems = Vec::new();
-    let progress = progress_bar(settings.progress, manifest.targets.len());
+    let progress = crate::progress::bar(
+        settings.progress,
+        manifest.targets.len() as u64,
+        "targets checked",
+    );
     for (i, target) in manifest.targets.iter().enumerate() {
         progress.inc(1);
         let (config, berry) = groups[i];
@@ -222,7 +227,7 @@ pub fn import(
             ),
         ));
     }
-    let splits = split_by_group(&manifest, settings);
+    let splits = split_by_group(&manifest, &group_names, settings);
     let written = Manifest {
         format: IMPORT_FORMAT.to_string(),
         generator_version: Some(env!("CARGO_PKG_VERSION").to_string()),
@@ -240,7 +245,7 @@ pub fn import(
     Ok(ImportSummary {
         out: out.to_path_buf(),
         targets: prepared.len(),
-        groups: groups.iter().map(|g| g.0).max().map_or(0, |m| m + 1),
+        groups: group_names.len(),
         train: written.splits.train.len(),
         val: written.splits.val.len(),
         test: written.splits.test.len(),
@@ -250,19 +255,6 @@ pub fn import(
             .map(|p| p.max_rms_residual)
             .fold(0.0, f64::max),
     })
-}
-
-fn progress_bar(show: bool, len: usize) -> indicatif::ProgressBar {
-    if !show {
-        return indicatif::ProgressBar::hidden();
-    }
-    let bar = indicatif::ProgressBar::new(len as u64);
-    if let Ok(style) =
-        indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} targets checked  eta {eta}")
-    {
-        bar.set_style(style);
-    }
-    bar
 }
 
 fn check_fractions(s: &ImportSettings) -> Result<()> {
@@ -304,9 +296,9 @@ fn read_manifest(path: &Path) -> Result<ImportManifest> {
     Ok(manifest)
 }
 
-/// Each target's (group index, index within its group); groups in name
-/// order. Errors name duplicate or malformed ids.
-fn group_indices(manifest: &ImportManifest, path: &Path) -> Result<Vec<(usize, usize)>> {
+/// Every id well-formed and unique, every group named; errors name the
+/// target.
+fn check_ids_and_groups(manifest: &ImportManifest, path: &Path) -> Result<()> {
     let mut seen = std::collections::HashSet::new();
     for (i, t) in manifest.targets.iter().enumerate() {
         check_target_id(&t.id)
@@ -324,35 +316,36 @@ fn group_indices(manifest: &ImportManifest, path: &Path) -> Result<Vec<(usize, u
             ));
         }
     }
-    let names: BTreeMap<&str, usize> = {
-        let mut sorted: Vec<&str> = manifest.targets.iter().map(|t| t.group.as_str()).collect();
-        sorted.sort_unstable();
-        sorted.dedup();
-        sorted
-            .into_iter()
-            .enumerate()
-            .map(|(k, g)| (g, k))
-            .collect()
-    };
+    Ok(())
+}
+
+/// The group names, sorted and unique.
+fn group_names(manifest: &ImportManifest) -> Vec<&str> {
+    let mut names: Vec<&str> = manifest.targets.iter().map(|t| t.group.as_str()).collect();
+    names.sort_unstable();
+    names.dedup();
+    names
+}
+
+/// Each target's (index of its group in `names`, index within its group).
+fn group_indices(manifest: &ImportManifest, names: &[&str]) -> Vec<(usize, usize)> {
     let mut counts = vec![0usize; names.len()];
-    Ok(manifest
+    manifest
         .targets
         .iter()
         .map(|t| {
-            let g = names[t.group.as_str()];
+            let g = names.binary_search(&t.group.as_str()).unwrap_or_default();
             counts[g] += 1;
             (g, counts[g] - 1)
         })
-        .collect())
+        .collect()
 }
 
 /// Groups shuffled by the seed, then cut into val / test / train; a group
 /// never spans two sets. With at least three groups and a positive
 /// fraction, each of val and test gets at least one group.
-fn split_by_group(manifest: &ImportManifest, s: &ImportSettings) -> Splits {
-    let mut groups: Vec<&str> = manifest.targets.iter().map(|t| t.group.as_str()).collect();
-    groups.sort_unstable();
-    groups.dedup();
+fn split_by_group(manifest: &ImportManifest, names: &[&str], s: &ImportSettings) -> Splits {
+    let mut groups = names.to_vec();
     groups.shuffle(&mut rand_chacha::ChaCha8Rng::seed_from_u64(s.seed));
     let n = groups.len();
     let count = |f: f64| {
@@ -440,12 +433,7 @@ impl Context<'_> {
             duration_s: prior.duration_s,
             promp: self.basis.config().clone(),
             demos: prior.demos,
-            distribution: DistributionJson {
-                mean: dist.mean.as_slice().to_vec(),
-                cov: (0..dist.dim())
-                    .map(|r| dist.cov.row(r).iter().copied().collect())
-                    .collect(),
-            },
+            distribution: DistributionJson::from(dist),
             annotation: annotation::joints_from_distribution(dist)?,
         };
         record.validate()?;
@@ -527,11 +515,7 @@ impl Context<'_> {
         let poses: Vec<_> = finals.iter().map(|q| self.robot.tcp_pose(q)).collect();
         Ok(TargetPrior {
             duration_s: fit.median_duration_s(),
-            max_rms_residual: fit
-                .demos
-                .iter()
-                .map(|d| d.rms_residual_rad)
-                .fold(0.0, f64::max),
+            max_rms_residual: fit.max_rms_residual(),
             demos: fit
                 .weights
                 .iter()

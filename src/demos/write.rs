@@ -5,10 +5,10 @@
 //! Every file is written whole or not at all.
 
 use super::fit::{DemoReport, PriorFit};
-use crate::fsio::write_atomic;
 use crate::optim::request::PriorSpec;
 use crate::promp::{annotation, PrompConfig};
-use crate::{Error, Result};
+use crate::synth::dataset::write_json_atomic;
+use crate::Result;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
@@ -56,40 +56,27 @@ pub fn write_prior<'a>(
     let dist = &fit.distribution;
     let joints = annotation::joints_from_distribution(dist)?;
     annotation::write_dir(out, index, &joints)?;
-    let mut files: Vec<PathBuf> = (1..=dist.n_joints)
-        .map(|j| out.join(format!("J{j}")).join(format!("{index}.json")))
-        .collect();
     let request = PriorRequest {
         prior: PriorSpec::from(dist),
         promp: config,
         duration_s: fit.median_duration_s(),
     };
-    files.push(write_json(&out.join("prior.json"), &request)?);
+    let (prior_path, fit_path) = (out.join("prior.json"), out.join("fit.json"));
+    write_json_atomic(&prior_path, &request)?;
+    let files: Vec<PathBuf> = (1..=dist.n_joints)
+        .map(|j| out.join(format!("J{j}")).join(format!("{index}.json")))
+        .chain([prior_path, fit_path.clone()])
+        .collect();
     let report = FitReport {
         robot: robot.name(),
         joint_names: robot.joint_names(),
         promp: config,
         demonstrations: fit.demos.len(),
         duration_s: fit.median_duration_s(),
-        max_rms_residual_rad: fit
-            .demos
-            .iter()
-            .map(|d| d.rms_residual_rad)
-            .fold(0.0, f64::max),
+        max_rms_residual_rad: fit.max_rms_residual(),
         demos: &fit.demos,
-        files: {
-            let mut all = files.clone();
-            all.push(out.join("fit.json"));
-            all
-        },
+        files,
     };
-    write_json(&out.join("fit.json"), &report)?;
+    write_json_atomic(&fit_path, &report)?;
     Ok(report)
-}
-
-fn write_json(path: &Path, value: &impl Serialize) -> Result<PathBuf> {
-    let text = serde_json::to_string_pretty(value)
-        .map_err(|e| Error::Numerical(format!("cannot serialise {}: {e}", path.display())))?;
-    write_atomic(path, text.as_bytes())?;
-    Ok(path.to_path_buf())
 }

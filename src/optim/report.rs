@@ -56,7 +56,8 @@ pub struct TrajectoryPoint {
     pub positions: Vec<f64>,
     /// Joint velocities (rad/s).
     pub velocities: Vec<f64>,
-    /// Joint accelerations (rad/s²); written in the ROS 2 format only.
+    /// Joint accelerations (rad/s²); computed and written for the ROS 2
+    /// format only (empty otherwise).
     pub accelerations: Vec<f64>,
     /// Seconds from the start of the motion.
     pub time_from_start: f64,

@@ -5,7 +5,9 @@
 //! always comes from here.
 
 use super::problem::Problem;
-use super::report::{Closest, JointTrajectory, TrajectoryPoint, TrajectoryReport};
+use super::report::{
+    Closest, JointTrajectory, TrajectoryFormat, TrajectoryPoint, TrajectoryReport,
+};
 use super::tolerances::FEASIBILITY_TOLERANCE;
 use crate::scene::Clearance;
 use nalgebra::{DMatrix, DVector};
@@ -188,6 +190,17 @@ impl Problem {
         )
     }
 
+    /// Joint accelerations at phase `z`, only where the answer's format
+    /// writes them (ROS 2); empty otherwise.
+    fn accelerations_at(&self, z: f64, wm: &DMatrix<f64>) -> Vec<f64> {
+        if self.trajectory_format != TrajectoryFormat::Ros2 {
+            return Vec::new();
+        }
+        let qdd = self.basis.second_derivative_row_at(z).transpose() * wm
+            / (self.duration * self.duration);
+        qdd.iter().copied().collect()
+    }
+
     /// The trajectory of `w` on the request's grid, ROS-shaped.
     pub fn trajectory(&self, weights: &[f64]) -> JointTrajectory {
         let w = DVector::from_column_slice(weights);
@@ -199,15 +212,11 @@ impl Problem {
             .phases()
             .iter()
             .enumerate()
-            .map(|(p, &z)| {
-                let qdd = self.basis.second_derivative_row_at(z).transpose() * &wm
-                    / (self.duration * self.duration);
-                TrajectoryPoint {
-                    positions: q.row(p).iter().cloned().collect(),
-                    velocities: qd.row(p).iter().cloned().collect(),
-                    accelerations: qdd.iter().cloned().collect(),
-                    time_from_start: z * self.duration,
-                }
+            .map(|(p, &z)| TrajectoryPoint {
+                positions: q.row(p).iter().cloned().collect(),
+                velocities: qd.row(p).iter().cloned().collect(),
+                accelerations: self.accelerations_at(z, &wm),
+                time_from_start: z * self.duration,
             })
             .collect();
         JointTrajectory {

@@ -252,6 +252,17 @@ pub struct DistributionJson {
     pub cov: Vec<Vec<f64>>,
 }
 
+impl From<&crate::promp::WeightDistribution> for DistributionJson {
+    fn from(dist: &crate::promp::WeightDistribution) -> Self {
+        DistributionJson {
+            mean: dist.mean.as_slice().to_vec(),
+            cov: (0..dist.dim())
+                .map(|r| dist.cov.row(r).iter().copied().collect())
+                .collect(),
+        }
+    }
+}
+
 /// `targets/<id>.json`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TargetRecord {

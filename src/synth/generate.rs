@@ -26,7 +26,7 @@ use crate::synth::settings::RegionAnchor;
 use crate::synth::settings::SynthSettings;
 use crate::{Error, Result};
 use image::RgbImage;
-use nalgebra::{Point3, Vector3};
+use nalgebra::Point3;
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -89,10 +89,7 @@ impl Generator {
             ));
         }
         let basis = Basis::new(&PrompConfig::default())?;
-        let home_pose = robot.tcp_pose(&robot.home());
-        let tcp = Point3::from(home_pose.translation.vector);
-        let axis = home_pose.rotation * Vector3::z();
-        let camera = Camera::on_gripper(&settings.camera.model(), tcp, axis)?;
+        let camera = Camera::at_home(&settings.camera.model(), &robot)?;
         let g = Generator {
             settings,
             robot,
@@ -311,7 +308,6 @@ impl Generator {
         td: TargetDemos,
     ) -> TargetRecord {
         let entry = TargetEntry::new(config, index);
-        let n = td.distribution.mean.len();
         TargetRecord {
             id: entry.id,
             config,
@@ -336,12 +332,7 @@ impl Generator {
                     final_q: d.final_q(),
                 })
                 .collect(),
-            distribution: DistributionJson {
-                mean: td.distribution.mean.iter().copied().collect(),
-                cov: (0..n)
-                    .map(|i| td.distribution.cov.row(i).iter().copied().collect())
-                    .collect(),
-            },
+            distribution: DistributionJson::from(&td.distribution),
             annotation: td.annotation,
         }
     }
@@ -471,7 +462,11 @@ pub fn generate(generator: &Generator, options: &GenerateOptions) -> Result<Gene
             .map_err(|e| Error::file(&d, format!("cannot create directory: {e}")))?;
     }
     let s = generator.settings();
-    let bar = progress_bar(options.progress, (s.configs * s.berries_per_config) as u64);
+    let bar = crate::progress::bar(
+        options.progress,
+        (s.configs * s.berries_per_config) as u64,
+        "targets",
+    );
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(options.workers.unwrap_or(0))
         .build()
@@ -515,17 +510,4 @@ fn write_config(out: &Path, output: &ConfigOutput) -> Result<()> {
         dataset::write_json_atomic(&out.join(format!("targets/{}.json", record.id)), record)?;
     }
     Ok(())
-}
-
-fn progress_bar(show: bool, len: u64) -> indicatif::ProgressBar {
-    if !show {
-        return indicatif::ProgressBar::hidden();
-    }
-    let bar = indicatif::ProgressBar::new(len);
-    if let Ok(style) = indicatif::ProgressStyle::with_template(
-        "{bar:40} {pos}/{len} targets  {per_sec}  eta {eta}",
-    ) {
-        bar.set_style(style);
-    }
-    bar
 }
