@@ -2,17 +2,13 @@
 //! exit codes, the JSON on stdout (`mean_final_position_error_m`), the
 //! files written, and a clear error for a bad flag.
 
-mod net_common;
-
-mod cli_support;
-
-use cli_support::dpmp;
+use crate::common::cli::dpmp;
 
 #[test]
 fn train_then_eval_through_the_cli() {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("data");
-    net_common::write_dataset(&data, 3, 2, 64, 48, 5);
+    crate::common::net::write_dataset(&data, 3, 2, 64, 48, 5);
     let (data_s, out) = (data.to_str().unwrap(), dir.path().join("m"));
     let out_s = out.to_str().unwrap();
     let common = [

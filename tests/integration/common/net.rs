@@ -2,8 +2,6 @@
 //! `dpmp data generate` format (random images with a white target box,
 //! random valid block-diagonal weight distributions) and tiny settings.
 
-#![allow(dead_code)]
-
 use dpmp::net::Arch;
 use dpmp::train::{ShapeSettings, TrainSettings};
 use rand::{Rng, SeedableRng};

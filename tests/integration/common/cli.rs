@@ -1,6 +1,5 @@
 //! Running the `dpmp` binary (the one cargo built for this test run) from
 //! the CLI integration tests.
-#![allow(dead_code)] // each test binary uses a subset
 
 use std::ffi::OsStr;
 use std::process::Output;

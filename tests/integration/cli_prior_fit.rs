@@ -7,9 +7,7 @@
 //! `prior.json` is a request `dpmp optimize` solves. Bad recordings are
 //! errors naming the file and the column, and nothing is written.
 
-mod cli_support;
-
-use cli_support::{arg, dpmp, dpmp_ok, stderr};
+use crate::common::cli::{arg, dpmp, dpmp_ok, stderr};
 use dpmp::promp::{annotation, Basis, PrompConfig, WeightDistribution};
 use dpmp::robot::Robot;
 use nalgebra::{DMatrix, DVector};

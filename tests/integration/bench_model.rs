@@ -5,8 +5,6 @@
 //! `prior-mean` equals the network prior mean's error computed here
 //! independently.
 
-mod net_common;
-
 use dpmp::bench::{method_from_name, run_model_suite, ModelSource, RunSettings};
 use dpmp::net::{Arch, Model};
 use dpmp::robot::Robot;
@@ -35,7 +33,7 @@ fn model_mode_runs_the_plan_pipeline_and_reports_final_tcp_error() {
     )
     .unwrap();
     let model_dir = dir.path().join("model");
-    let mut train = net_common::tiny_settings(&data, &model_dir, Arch::Direct);
+    let mut train = crate::common::net::tiny_settings(&data, &model_dir, Arch::Direct);
     (train.epochs_tp1, train.epochs_tp2, train.epochs_tp3) = (1, 1, 1);
     dpmp::train::train(&train).unwrap();
 

@@ -7,9 +7,8 @@
 use dpmp::robot::Robot;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
-mod cli_support;
 
-use cli_support::dpmp;
+use crate::common::cli::dpmp;
 
 fn default_model() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("models/default")

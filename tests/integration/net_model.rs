@@ -3,8 +3,6 @@
 //! round trip, errors naming the tensor), preprocessing shared by training
 //! and inference, input validation of the inference API.
 
-mod net_common;
-
 use candle_core::{Device, Tensor};
 use dpmp::net::checkpoint::{self, read_tensors, write_tensors};
 use dpmp::net::heads::HeadOutput;
@@ -83,7 +81,7 @@ fn random_loss_inputs(rng: &mut ChaCha8Rng, b: usize) -> (Vec<f32>, Vec<f32>, Ve
     let tm: Vec<f32> = (0..b * j * n).map(|_| rng.gen_range(-1.0..1.0)).collect();
     let mut tc = Vec::new();
     for _ in 0..b * j {
-        let m = net_common::random_spd(rng, n, 0.1);
+        let m = crate::common::net::random_spd(rng, n, 0.1);
         tc.extend(m.iter().flatten().map(|&v| v as f32));
     }
     (pm, code, tm, tc)
@@ -361,7 +359,7 @@ fn predict_validates_the_box_and_scales_the_condition_with_image_size() {
 #[test]
 fn preprocessing_is_identical_in_training_and_inference_paths() {
     let dir = tempfile::tempdir().unwrap();
-    net_common::write_dataset(dir.path(), 2, 3, 64, 48, 4);
+    crate::common::net::write_dataset(dir.path(), 2, 3, 64, 48, 4);
     let config = tiny_config(Arch::Cvae);
     let data = dpmp::train::data::load_split(dir.path(), "train", &config.preprocess).unwrap();
     let model = Model::from_network(Network::new(config, 0, &Device::Cpu).unwrap());

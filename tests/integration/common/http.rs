@@ -1,11 +1,8 @@
 //! Shared helpers of the HTTP integration tests: a server on an ephemeral
-//! loopback port, a blocking client, and a small JSON-schema validator for
-//! the subset of OpenAPI 3.1 that `api/openapi.yaml` uses.
+//! loopback port, a blocking client, and checks of responses against
+//! `api/openapi.yaml`.
 
-#![allow(dead_code)]
-
-pub mod schema;
-
+use super::schema;
 use dpmp::service::{AppState, RunningServer, ServiceConfig};
 use serde_json::Value;
 use std::time::Duration;

@@ -5,9 +5,7 @@
 //! splits never share a plant, the result trains and plans end to end, and
 //! bad manifests are reported target by target with nothing written.
 
-mod cli_support;
-
-use cli_support::{arg, dpmp, dpmp_ok, stderr};
+use crate::common::cli::{arg, dpmp, dpmp_ok, stderr};
 use dpmp::robot::Robot;
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};

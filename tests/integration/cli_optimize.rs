@@ -3,9 +3,7 @@
 use dpmp::optim::example::{typical_request, ExampleSettings};
 use dpmp::robot::Robot;
 
-mod cli_support;
-
-use cli_support::{arg, dpmp, dpmp_ok, stderr};
+use crate::common::cli::{arg, dpmp, dpmp_ok, stderr};
 
 fn write_request(
     dir: &std::path::Path,

@@ -2,11 +2,9 @@
 //! same set, every documented error code is one the service can answer, and
 //! real responses validate against the spec's schemas.
 
-mod http_support;
-
+use crate::common::http::*;
+use crate::common::schema::validate;
 use dpmp::service::routes;
-use http_support::schema::validate;
-use http_support::*;
 use serde_json::Value;
 use std::collections::BTreeSet;
 

@@ -3,8 +3,6 @@
 //! seed, an interrupted run resumes to the same weights, every architecture
 //! trains through its phases and evaluates to finite tables.
 
-mod net_common;
-
 use dpmp::net::checkpoint::read_tensors;
 use dpmp::net::{Arch, Model};
 use dpmp::train::log::EpochRecord;
@@ -25,9 +23,9 @@ fn tiny_model_overfits_four_samples() {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("data");
     // 2 configurations x 4 berries: config 0 -> val, config 1 -> train (4 samples).
-    net_common::write_dataset(&data, 2, 4, 32, 24, 1);
+    crate::common::net::write_dataset(&data, 2, 4, 32, 24, 1);
     let out = dir.path().join("model");
-    let mut s = net_common::tiny_settings(&data, &out, Arch::Direct);
+    let mut s = crate::common::net::tiny_settings(&data, &out, Arch::Direct);
     s.epochs_tp2 = 150;
     s.patience = 1000;
     s.batch = 4;
@@ -53,10 +51,10 @@ fn the_task_space_and_start_terms_and_latent_dropout_train_and_are_recorded() {
     // settings end up in the model's config.
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("data");
-    net_common::write_dataset(&data, 2, 4, 32, 24, 1);
+    crate::common::net::write_dataset(&data, 2, 4, 32, 24, 1);
     let run = |name: &str, tcp_weight: f64, start_weight: f64, latent_dropout: f64| {
         let out = dir.path().join(name);
-        let mut s = net_common::tiny_settings(&data, &out, Arch::Cvae);
+        let mut s = crate::common::net::tiny_settings(&data, &out, Arch::Cvae);
         s.epochs_tp1 = 1;
         s.epochs_tp2 = 3;
         s.tcp_weight = tcp_weight;
@@ -114,10 +112,10 @@ fn weights(out: &Path) -> Vec<(String, Vec<f32>)> {
 fn training_is_deterministic_and_resumes_exactly() {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("data");
-    net_common::write_dataset(&data, 3, 3, 32, 24, 2);
+    crate::common::net::write_dataset(&data, 3, 3, 32, 24, 2);
     let run = |name: &str, f: &dyn Fn(&mut TrainSettings)| {
         let out = dir.path().join(name);
-        let mut s = net_common::tiny_settings(&data, &out, Arch::Vae);
+        let mut s = crate::common::net::tiny_settings(&data, &out, Arch::Vae);
         s.latent_tuning = true;
         s.seed = 7;
         f(&mut s);
@@ -132,7 +130,7 @@ fn training_is_deterministic_and_resumes_exactly() {
 
     // Interrupt after 4 epochs (inside tp2), then resume.
     let r = dir.path().join("r");
-    let mut s = net_common::tiny_settings(&data, &r, Arch::Vae);
+    let mut s = crate::common::net::tiny_settings(&data, &r, Arch::Vae);
     s.latent_tuning = true;
     s.seed = 7;
     s.stop_after_epochs = Some(4);
@@ -149,9 +147,9 @@ fn training_is_deterministic_and_resumes_exactly() {
 fn latent_tuning_extends_a_finished_run_to_the_same_weights() {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("data");
-    net_common::write_dataset(&data, 3, 3, 32, 24, 3);
+    crate::common::net::write_dataset(&data, 3, 3, 32, 24, 3);
     let settings = |out: &Path, latent_tuning: bool| {
-        let mut s = net_common::tiny_settings(&data, out, Arch::Ae);
+        let mut s = crate::common::net::tiny_settings(&data, out, Arch::Ae);
         s.latent_tuning = latent_tuning;
         s.seed = 5;
         s
@@ -185,10 +183,10 @@ fn toy_fk(q: &[f64]) -> Isometry3<f64> {
 fn every_architecture_trains_and_evaluates() {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("data");
-    net_common::write_dataset(&data, 4, 3, 32, 24, 3);
+    crate::common::net::write_dataset(&data, 4, 3, 32, 24, 3);
     for (arch, tuning) in [(Arch::Ae, false), (Arch::Cvae, true), (Arch::Direct, false)] {
         let out = dir.path().join(arch.as_str());
-        let mut s = net_common::tiny_settings(&data, &out, arch);
+        let mut s = crate::common::net::tiny_settings(&data, &out, arch);
         s.latent_tuning = tuning;
         let outcome = train(&s).unwrap();
         let phases: Vec<&String> = outcome.summary.epochs.keys().collect();
@@ -231,10 +229,10 @@ fn bad_dataset_and_settings_give_clear_errors() {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("data");
     let out = dir.path().join("m");
-    let s = net_common::tiny_settings(&data, &out, Arch::Ae);
+    let s = crate::common::net::tiny_settings(&data, &out, Arch::Ae);
     let msg = train(&s).unwrap_err().to_string();
     assert!(msg.contains("manifest.json"), "{msg}");
-    net_common::write_dataset(&data, 2, 2, 32, 24, 4);
+    crate::common::net::write_dataset(&data, 2, 2, 32, 24, 4);
     std::fs::write(data.join("targets/c0001_b00.json"), "{\"box\": [1, 2]}").unwrap();
     let msg = train(&s).unwrap_err().to_string();
     assert!(msg.contains("c0001_b00.json"), "{msg}");

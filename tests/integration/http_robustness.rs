@@ -3,9 +3,7 @@
 //! in flight, the deadline answers without hanging, and a bounded fuzz run
 //! of mutated bodies never gets a 5xx or a non-JSON answer.
 
-mod http_support;
-
-use http_support::*;
+use crate::common::http::*;
 use rand::{Rng, SeedableRng};
 use serde_json::{json, Value};
 use std::time::{Duration, Instant};

@@ -1,9 +1,7 @@
 //! `dpmp prior` end to end: example -> inspect (json, table) -> plot, and
 //! bad input exits non-zero naming the file and field.
 
-mod cli_support;
-
-use cli_support::{arg, dpmp, dpmp_ok, stderr};
+use crate::common::cli::{arg, dpmp, dpmp_ok, stderr};
 
 #[test]
 fn example_inspect_and_plot() {

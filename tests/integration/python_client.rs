@@ -4,14 +4,12 @@
 //! refused request raising `DpmpError` with the server's code and field.
 //! Skipped, with a message, only when no `python3` is on the machine.
 
-mod http_support;
-
+use crate::common::http::test_config;
 use dpmp::net::Model;
 use dpmp::robot::Robot;
 use dpmp::service::{AppState, RunningServer};
 use dpmp::synth::generate::Generator;
 use dpmp::synth::settings::SynthSettings;
-use http_support::test_config;
 use serde_json::Value;
 use std::io::Write as _;
 use std::path::Path;

@@ -6,8 +6,7 @@
 //! (when `optimal`) the requested clearance, JSON and multipart give the
 //! same plan, and the same request gives the same bytes (bar `solve_ms`).
 
-mod http_support;
-
+use crate::common::http::*;
 use base64::Engine as _;
 use dpmp::net::Model;
 use dpmp::robot::Robot;
@@ -15,7 +14,6 @@ use dpmp::service::{AppState, RunningServer};
 use dpmp::synth::dataset::TargetRecord;
 use dpmp::synth::generate::Generator;
 use dpmp::synth::settings::SynthSettings;
-use http_support::*;
 use serde_json::{json, Value};
 use std::path::Path;
 

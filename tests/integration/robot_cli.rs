@@ -1,11 +1,9 @@
 //! `dpmp robot fk | clearance | ik | shapes` through the real binary.
 
-mod cli_support;
-
 const HOME: &str = "0.0348,-1.0102,-0.1525,-2.5334,-0.1583,2.8798,0.0543";
 
 fn dpmp(args: &[&str]) -> (i32, serde_json::Value, String) {
-    let out = cli_support::dpmp(args);
+    let out = crate::common::cli::dpmp(args);
     let stdout = String::from_utf8_lossy(&out.stdout).to_string();
     let json = serde_json::from_str(&stdout).unwrap_or(serde_json::Value::Null);
     (

@@ -1,10 +1,8 @@
 //! Endpoints over a real socket: happy paths with numeric checks and every
 //! error class (400, 401, 404, 405, 413, 415, 422, 503).
 
-mod http_support;
-
+use crate::common::http::*;
 use dpmp::service::auth::Token;
-use http_support::*;
 use serde_json::{json, Value};
 
 #[test]
