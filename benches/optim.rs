@@ -11,10 +11,15 @@
 //! default inner solver (the dual active-set method) and with
 //! `inner_solver: clarabel` (every QP by Clarabel); `DPMP_BENCH_INNER=
 //! active_set` or `clarabel` runs one of them only.
+//!
+//! The problems are rest-to-rest with the Panda's acceleration and jerk
+//! limits (the request defaults). `DPMP_BENCH_LIMITS=compare` first runs
+//! them without those rows (`boundary: free`, a robot without acceleration
+//! and jerk limits), in the same process, for the time ratio.
 
 use criterion::{black_box, Criterion};
 use dpmp::optim::example::{typical_request, ExampleSettings};
-use dpmp::optim::{optimize, InnerSolver, OptimizeRequest, SolveControl, Status};
+use dpmp::optim::{optimize, Boundary, InnerSolver, OptimizeRequest, SolveControl, Status};
 use dpmp::robot::Robot;
 use std::time::Instant;
 
@@ -60,15 +65,26 @@ fn peak_rss_mb() -> f64 {
         .map_or(f64::NAN, |kb| kb / 1024.0)
 }
 
-fn sweep(robot: &Robot, requests: &[OptimizeRequest], inner: InnerSolver) {
+/// The Panda without acceleration and jerk limits, for the comparison.
+fn panda_without_rate_limits(robot: &Robot) -> Robot {
+    let mut yaml = String::from("joint_limits:\n");
+    for name in robot.joint_names() {
+        yaml += &format!("  {name}:\n    has_acceleration_limits: false\n");
+    }
+    robot.clone().with_limits_yaml(&yaml).expect("limits yaml")
+}
+
+fn sweep(robot: &Robot, requests: &[OptimizeRequest], inner: InnerSolver, boundary: Boundary) {
     let requests: Vec<OptimizeRequest> = requests
         .iter()
         .map(|r| {
             let mut r = r.clone();
             r.options.inner_solver = inner;
+            r.boundary = boundary;
             r
         })
         .collect();
+    let rate_limited = robot.limits().iter().any(|l| l.acceleration.is_some());
     let mut active_set_steps = Vec::new();
     let mut ms_per_qp = Vec::new();
     let mut solve_ms = Vec::new();
@@ -128,7 +144,7 @@ fn sweep(robot: &Robot, requests: &[OptimizeRequest], inner: InnerSolver) {
         v.sort_by(|a, b| a.total_cmp(b));
     }
     let n = requests.len();
-    println!("optim sweep over {n} typical problems (10 obstacles, 150 samples, clearance 0.02 m), inner solver {inner:?}");
+    println!("optim sweep over {n} typical problems (10 obstacles, 150 samples, clearance 0.02 m), inner solver {inner:?}, boundary {boundary:?}, acceleration/jerk limits {rate_limited}");
     println!(
         "  status: optimal {optimal}, infeasible {infeasible}, max_iterations {max_iter}; prior mean already feasible: {mean_feasible}"
     );
@@ -191,8 +207,13 @@ fn main() {
         Ok("active_set") => vec![InnerSolver::ActiveSet],
         _ => vec![InnerSolver::ActiveSet, InnerSolver::Clarabel],
     };
+    let compare = std::env::var("DPMP_BENCH_LIMITS").as_deref() == Ok("compare");
     for inner in inners {
-        sweep(&robot, &requests, inner);
+        if compare {
+            let plain = panda_without_rate_limits(&robot);
+            sweep(&plain, &requests, inner, Boundary::Free);
+        }
+        sweep(&robot, &requests, inner, Boundary::Rest);
     }
     if std::env::var_os("DPMP_BENCH_SWEEP_ONLY").is_some() {
         return;

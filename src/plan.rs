@@ -146,10 +146,7 @@ pub fn predict_and_optimize(
                     "a goal is derived from the depth / target_position; send one or the other",
                 ));
             }
-            request.goal = Some(Goal {
-                position: report.goal,
-                tolerance_m: report.goal_tolerance_m,
-            });
+            request.goal = Some(Goal::at(report.goal, report.goal_tolerance_m));
             Some(report)
         }
         None => None,

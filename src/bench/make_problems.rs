@@ -220,6 +220,7 @@ fn try_make(
                  "tolerance_m": GOAL_TOLERANCE_M},
         "obstacles": obstacles,
         "clearance_m": CLEARANCE_M,
+        "boundary": "rest",
     }));
     let start: Vec<f64> = serde_json::from_value(request["start"].clone())
         .map_err(|e| Error::Numerical(format!("start: {e}")))?;

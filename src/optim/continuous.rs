@@ -148,14 +148,9 @@ impl Problem {
 
     /// A new sample at phase `z`: positions, velocities and clearance.
     fn sample_at(&self, wm: &DMatrix<f64>, z: f64) -> Sample {
-        let q: Vec<f64> = (wm.transpose() * self.basis.row_at(z))
-            .iter()
-            .copied()
-            .collect();
-        let qd: Vec<f64> = (wm.transpose() * self.basis.derivative_row_at(z) / self.duration)
-            .iter()
-            .copied()
-            .collect();
+        let [psi, dpsi, ..] = self.warp.time_rows(&self.basis, z, self.duration);
+        let q: Vec<f64> = (wm.transpose() * psi).iter().copied().collect();
+        let qd: Vec<f64> = (wm.transpose() * dpsi).iter().copied().collect();
         let frames = self.robot.fk(&q);
         let clearance = self
             .scene

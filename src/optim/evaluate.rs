@@ -4,7 +4,7 @@
 
 use super::phases::PhaseRows;
 use super::problem::Problem;
-use super::tolerances::buffered_tolerance;
+use super::tolerances::{buffered_angle, buffered_tolerance};
 use super::tolerances::{CLEARANCE_BUFFER_M, FEASIBILITY_TOLERANCE, LINEAR_TOLERANCE};
 use crate::robot::Frames;
 use crate::scene::Clearance;
@@ -41,6 +41,23 @@ pub(super) struct GoalEval {
     pub(super) excess: f64,
     /// Distance beyond the buffered tolerance the QP aims for (the merit's).
     pub(super) buffered_excess: f64,
+    /// The approach direction, when the goal has one.
+    pub(super) approach: Option<ApproachEval>,
+}
+
+/// The approach constraint `a(q)·u >= cos(tolerance)` at the final
+/// configuration, `a` the gripper's z axis and `u` the goal's axis.
+pub(super) struct ApproachEval {
+    /// `a(q)·u`.
+    pub(super) cosine: f64,
+    /// `∂(a·u)/∂q`: `(ω_j × a)·u` for each joint's angular Jacobian column.
+    pub(super) gradient: Vec<f64>,
+    /// `cos(tolerance) - a·u` when positive (what must reach zero).
+    pub(super) excess: f64,
+    /// The same against the buffered tolerance the QP aims for.
+    pub(super) buffered_excess: f64,
+    /// The cosine the QP aims for.
+    pub(super) target: f64,
 }
 
 impl GridEval {
@@ -49,7 +66,9 @@ impl GridEval {
     }
 
     pub(super) fn goal_excess(&self) -> f64 {
-        self.goal.as_ref().map_or(0.0, |g| g.buffered_excess)
+        self.goal.as_ref().map_or(0.0, |g| {
+            g.buffered_excess + g.approach.as_ref().map_or(0.0, |a| a.buffered_excess)
+        })
     }
 
     pub(super) fn feasible(&self) -> bool {
@@ -100,14 +119,18 @@ impl Problem {
             let residual = p - Vector3::from(g.position);
             let excess = (residual.norm() - g.tolerance_m).max(0.0);
             let buffered_excess = (residual.norm() - buffered_tolerance(g.tolerance_m)).max(0.0);
+            let approach = self.approach_eval(&q);
             GoalEval {
                 q,
                 residual,
                 excess,
                 buffered_excess,
+                approach,
             }
         });
-        let goal_excess = goal.as_ref().map_or(0.0, |g| g.excess);
+        let goal_excess = goal.as_ref().map_or(0.0, |g| {
+            g.excess + g.approach.as_ref().map_or(0.0, |a| a.excess)
+        });
         let linear_ok = self.linear_ok(rows, &w);
         GridEval {
             cost: (&z - centre).norm_squared(),
@@ -119,6 +142,29 @@ impl Problem {
             goal,
             linear_ok,
         }
+    }
+
+    /// The approach constraint at final configuration `q`, if the goal has
+    /// an approach axis.
+    fn approach_eval(&self, q: &[f64]) -> Option<ApproachEval> {
+        let (axis, tolerance) = self.approach()?;
+        let a = self.robot.tcp_pose(q).rotation * Vector3::z();
+        let jac = self.robot.tcp_jacobian(q);
+        let gradient = (0..jac.ncols())
+            .map(|j| {
+                let omega = Vector3::new(jac[(3, j)], jac[(4, j)], jac[(5, j)]);
+                omega.cross(&a).dot(&axis)
+            })
+            .collect();
+        let cosine = a.dot(&axis);
+        let target = buffered_angle(tolerance).cos();
+        Some(ApproachEval {
+            cosine,
+            gradient,
+            excess: (tolerance.cos() - cosine).max(0.0),
+            buffered_excess: (target - cosine).max(0.0),
+            target,
+        })
     }
 
     /// Whether `w` satisfies the equality, weight-bound and limit rows of
@@ -160,6 +206,19 @@ impl Problem {
                         "goal: the TCP ends {:.4} m from the goal (tolerance_m {:.4})",
                         ge.residual.norm(),
                         goal.tolerance_m
+                    ),
+                ));
+            }
+        }
+        if let Some(a) = eval.goal.as_ref().and_then(|g| g.approach.as_ref()) {
+            if a.excess > FEASIBILITY_TOLERANCE && worst.as_ref().is_none_or(|(e, _)| a.excess > *e)
+            {
+                let limit = self.approach().map_or(0.0, |(_, t)| t);
+                worst = Some((
+                    a.excess,
+                    format!(
+                        "goal.approach_axis: the gripper ends {:.4} rad off the approach axis (approach_tolerance_rad {limit:.4})",
+                        a.cosine.clamp(-1.0, 1.0).acos()
                     ),
                 ));
             }

@@ -4,7 +4,7 @@
 //! start configuration, and a goal at the mean's final TCP position. Used
 //! by the benchmarks, the property tests and the CLI examples.
 
-use super::request::{Goal, OptimizeRequest, PriorSpec, SolverOptions};
+use super::request::{Boundary, Goal, OptimizeRequest, PriorSpec, SolverOptions};
 use crate::promp::example::example_distribution;
 use crate::promp::{Basis, PrompConfig, WeightDistribution};
 use crate::robot::Robot;
@@ -30,6 +30,8 @@ pub struct ExampleSettings {
     pub with_goal: bool,
     /// Add a start constraint (the prior mean's start plus small noise).
     pub with_start: bool,
+    /// Velocity and acceleration at the ends (the request default: rest).
+    pub boundary: Boundary,
 }
 
 impl Default for ExampleSettings {
@@ -42,6 +44,7 @@ impl Default for ExampleSettings {
             offset_m: (0.02, 0.08),
             with_goal: true,
             with_start: true,
+            boundary: Boundary::Rest,
         }
     }
 }
@@ -128,16 +131,18 @@ pub fn typical_request(
         promp: config,
         duration_s: 4.0,
         start,
-        goal: settings.with_goal.then_some(Goal {
-            position: goal.into(),
-            tolerance_m: 0.01,
-        }),
+        goal: settings.with_goal.then_some(Goal::at(goal.into(), 0.01)),
         obstacles,
         clearance_m: settings.clearance_m,
         joint_limit_margin_rad: 0.0,
         samples: 0,
         options: SolverOptions::default(),
         trajectory_format: Default::default(),
+        boundary: settings.boundary,
+        acceleration_limits: None,
+        jerk_limits: None,
+        velocity_scaling: 1.0,
+        acceleration_scaling: 1.0,
     })
 }
 

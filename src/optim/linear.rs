@@ -1,6 +1,7 @@
 //! The constraints that are linear in the whitened weights: joint position
-//! limits (minus the margin) and velocity limits at the optimisation
-//! phases, start / final configuration equalities, and the opt-in weight
+//! limits (minus the margin) and velocity, acceleration and jerk limits at
+//! the optimisation phases, start / final configuration equalities, rest at
+//! both ends (velocity and acceleration zero), and the opt-in weight
 //! bounds. They enter every QP as hard rows.
 //!
 //! Only rows that can become active are sent to Clarabel: a row whose value
@@ -9,7 +10,7 @@
 //! a trust region the rows near the bound are sent and the rest are checked
 //! afterwards ([`LinearSet::violated`]) and added if needed.
 
-use super::phases::PhaseRows;
+use super::phases::{Derivative, PhaseRows};
 use super::qp::Inequality;
 use nalgebra::DVector;
 
@@ -18,21 +19,23 @@ pub const SCREEN_MARGIN: f64 = 0.05;
 
 /// Largest slack (rad) of a position row sent by [`LinearSet::screen_banded`].
 pub const SCREEN_BAND_POSITION: f64 = 0.2;
-/// Largest slack of a velocity row sent by [`LinearSet::screen_banded`], as a
-/// fraction of the velocity limit.
+/// Largest slack of a velocity, acceleration or jerk row sent by
+/// [`LinearSet::screen_banded`], as a fraction of its limit.
 pub const SCREEN_BAND_VELOCITY: f64 = 0.2;
 
-/// Which bound a row expresses.
+/// Fraction of an acceleration or jerk limit the QP rows keep inside it:
+/// an active limit peaks between two sampled phases, and this keeps the
+/// peak within the limit at 10× the optimisation sampling too.
+pub const RATE_BUFFER: f64 = 1e-3;
+
+/// Which bound a row expresses: the upper or lower bound of one time
+/// derivative of a joint.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub enum RowKind {
-    /// `q_j <= upper_j`.
-    PositionUpper,
-    /// `q_j >= lower_j`.
-    PositionLower,
-    /// `dq_j/dt <= v_j`.
-    VelocityUpper,
-    /// `dq_j/dt >= -v_j`.
-    VelocityLower,
+pub struct RowKind {
+    /// Position, velocity, acceleration or jerk.
+    pub derivative: Derivative,
+    /// `value <= bound` (else `value >= lower bound`).
+    pub upper: bool,
 }
 
 /// One trajectory row: phase index, joint, kind.
@@ -46,7 +49,7 @@ pub struct RowRef {
     pub kind: RowKind,
 }
 
-/// Joint bounds as the optimiser uses them (margin already applied).
+/// Joint bounds as the optimiser uses them (margin and scaling applied).
 #[derive(Clone, Debug)]
 pub struct LinearSet {
     /// Lower position bound per joint.
@@ -55,65 +58,81 @@ pub struct LinearSet {
     pub upper: Vec<f64>,
     /// Velocity bound per joint (rad/s).
     pub velocity: Vec<f64>,
+    /// Acceleration bound per joint (rad/s²), if any.
+    pub acceleration: Option<Vec<f64>>,
+    /// Jerk bound per joint (rad/s³), if any.
+    pub jerk: Option<Vec<f64>>,
     /// Required configuration at phase 0.
     pub start: Option<Vec<f64>>,
     /// Required configuration at phase 1.
     pub final_configuration: Option<Vec<f64>>,
+    /// Velocity and acceleration zero at both ends (checked; the timing
+    /// makes it hold).
+    pub rest: bool,
     /// Also bound every weight by its joint's position limits.
     pub bound_weights: bool,
 }
 
 impl LinearSet {
-    /// Signed excess `value - bound` of one row for weights `w` (> 0 = violated).
-    pub fn excess(&self, rows: &PhaseRows, w: &DVector<f64>, r: RowRef) -> f64 {
-        let j = r.joint;
-        match r.kind {
-            RowKind::PositionUpper => rows.joint_position(r.phase, j, w) - self.upper[j],
-            RowKind::PositionLower => self.lower[j] - rows.joint_position(r.phase, j, w),
-            RowKind::VelocityUpper => rows.joint_velocity(r.phase, j, w) - self.velocity[j],
-            RowKind::VelocityLower => -self.velocity[j] - rows.joint_velocity(r.phase, j, w),
+    /// The symmetric bound of derivative `d` of joint `j` (velocity and
+    /// above; `None` when that derivative is not limited).
+    pub fn rate_bound(&self, d: Derivative, j: usize) -> Option<f64> {
+        match d {
+            Derivative::Position => None,
+            Derivative::Velocity => Some(self.velocity[j]),
+            Derivative::Acceleration => self.acceleration.as_ref().map(|a| a[j]),
+            Derivative::Jerk => self.jerk.as_ref().map(|a| a[j]),
         }
     }
 
-    /// The row as `a·z <= b` given the weights at `z = 0` (the prior mean).
+    /// The kinds of row this set has: position and velocity always,
+    /// acceleration and jerk when limited.
+    pub fn kinds(&self) -> Vec<RowKind> {
+        Derivative::ALL
+            .into_iter()
+            .filter(|&d| d == Derivative::Position || self.rate_bound(d, 0).is_some())
+            .flat_map(|derivative| [true, false].map(|upper| RowKind { derivative, upper }))
+            .collect()
+    }
+
+    /// Signed excess `value - bound` of one row for weights `w` (> 0 = violated).
+    pub fn excess(&self, rows: &PhaseRows, w: &DVector<f64>, r: RowRef) -> f64 {
+        let (d, j) = (r.kind.derivative, r.joint);
+        let value = rows.value(d, r.phase, j, w);
+        match (self.rate_bound(d, j), r.kind.upper) {
+            (None, true) => value - self.upper[j],
+            (None, false) => self.lower[j] - value,
+            (Some(b), true) => value - b,
+            (Some(b), false) => -b - value,
+        }
+    }
+
+    /// The row as `a·z <= b` given the weights at `z = 0` (the prior mean);
+    /// acceleration and jerk rows aim [`RATE_BUFFER`] inside their bound.
     pub fn inequality(&self, rows: &PhaseRows, mean: &DVector<f64>, r: RowRef) -> Inequality {
         let excess0 = self.excess(rows, mean, r);
-        let a = match r.kind {
-            RowKind::PositionUpper => rows.position_row(r.phase, r.joint).clone(),
-            RowKind::PositionLower => -rows.position_row(r.phase, r.joint),
-            RowKind::VelocityUpper => rows.velocity_row(r.phase, r.joint).clone(),
-            RowKind::VelocityLower => -rows.velocity_row(r.phase, r.joint),
+        let buffer = match r.kind.derivative {
+            Derivative::Acceleration | Derivative::Jerk => self
+                .rate_bound(r.kind.derivative, r.joint)
+                .map_or(0.0, |b| RATE_BUFFER * b),
+            _ => 0.0,
         };
+        let a = rows.row(r.kind.derivative, r.phase, r.joint);
         Inequality {
-            a,
-            b: -excess0,
+            a: if r.kind.upper { a.clone() } else { -a },
+            b: -excess0 - buffer,
             penalty: None,
         }
     }
 
-    /// How far a row can move per unit of trust-region radius.
-    fn row_l1(rows: &PhaseRows, r: RowRef) -> f64 {
-        match r.kind {
-            RowKind::PositionUpper | RowKind::PositionLower => {
-                rows.position_row_l1(r.phase, r.joint)
-            }
-            RowKind::VelocityUpper | RowKind::VelocityLower => {
-                rows.velocity_row_l1(r.phase, r.joint)
-            }
-        }
-    }
-
     /// Every row of `rows`.
-    pub fn all_rows(rows: &PhaseRows) -> impl Iterator<Item = RowRef> + '_ {
-        let kinds = [
-            RowKind::PositionUpper,
-            RowKind::PositionLower,
-            RowKind::VelocityUpper,
-            RowKind::VelocityLower,
-        ];
+    pub fn all_rows<'a>(&self, rows: &'a PhaseRows) -> impl Iterator<Item = RowRef> + 'a {
+        let kinds = self.kinds();
         (0..rows.len()).flat_map(move |phase| {
+            let kinds = kinds.clone();
             (0..rows.n_joints()).flat_map(move |joint| {
                 kinds
+                    .clone()
                     .into_iter()
                     .map(move |kind| RowRef { phase, joint, kind })
             })
@@ -123,17 +142,14 @@ impl LinearSet {
     /// Rows that a step within `radius` of `w` (the weights of the current
     /// iterate) could violate; `None` radius: rows within [`SCREEN_MARGIN`].
     pub fn screen(&self, rows: &PhaseRows, w: &DVector<f64>, radius: Option<f64>) -> Vec<RowRef> {
-        Self::all_rows(rows)
-            .filter(|&r| {
-                let reach = radius.map_or(SCREEN_MARGIN, |d| d * Self::row_l1(rows, r) + 1e-9);
-                self.excess(rows, w, r) + reach >= 0.0
-            })
+        self.all_rows(rows)
+            .filter(|&r| self.excess(rows, w, r) + reach(rows, r, radius) >= 0.0)
             .collect()
     }
 
     /// Like [`LinearSet::screen`], but a row also needs its slack within a
     /// fixed band ([`SCREEN_BAND_POSITION`] rad, [`SCREEN_BAND_VELOCITY`] of
-    /// the velocity limit): rows far from their bound rarely become active
+    /// the rate limit): rows far from their bound rarely become active
     /// in one step, and the caller adds any row a solution violates.
     pub fn screen_banded(
         &self,
@@ -141,53 +157,68 @@ impl LinearSet {
         w: &DVector<f64>,
         radius: Option<f64>,
     ) -> Vec<RowRef> {
-        Self::all_rows(rows)
+        self.all_rows(rows)
             .filter(|&r| {
-                let band = match r.kind {
-                    RowKind::PositionUpper | RowKind::PositionLower => SCREEN_BAND_POSITION,
-                    RowKind::VelocityUpper | RowKind::VelocityLower => {
-                        SCREEN_BAND_VELOCITY * self.velocity[r.joint]
-                    }
-                };
-                let reach = radius
-                    .map_or(SCREEN_MARGIN, |d| d * Self::row_l1(rows, r) + 1e-9)
-                    .min(band);
-                self.excess(rows, w, r) + reach >= 0.0
+                let band = self
+                    .rate_bound(r.kind.derivative, r.joint)
+                    .map_or(SCREEN_BAND_POSITION, |b| SCREEN_BAND_VELOCITY * b);
+                self.excess(rows, w, r) + reach(rows, r, radius).min(band) >= 0.0
             })
             .collect()
     }
 
     /// Rows violated by more than `tolerance` at `w`.
     pub fn violated(&self, rows: &PhaseRows, w: &DVector<f64>, tolerance: f64) -> Vec<RowRef> {
-        Self::all_rows(rows)
+        self.all_rows(rows)
             .filter(|&r| self.excess(rows, w, r) > tolerance)
             .collect()
     }
 
-    /// Equalities `a·z = b` for the start (phase index 0 of `ends`) and
-    /// final (phase index 1) configurations.
-    pub fn equalities(&self, ends: &PhaseRows, mean: &DVector<f64>) -> Vec<(DVector<f64>, f64)> {
+    /// The derivatives each end must hold at a value: position at the
+    /// start / final configuration, velocity and acceleration at zero when
+    /// the motion is rest-to-rest. `(phase index in ends, derivative,
+    /// target per joint)`.
+    fn end_conditions(&self, n_joints: usize) -> Vec<(usize, Derivative, Vec<f64>)> {
         let mut out = Vec::new();
         for (p, target) in [(0, &self.start), (1, &self.final_configuration)] {
             if let Some(q) = target {
-                let q0 = ends.position(p, mean);
-                for j in 0..ends.n_joints() {
-                    out.push((ends.position_row(p, j).clone(), q[j] - q0[j]));
+                out.push((p, Derivative::Position, q.clone()));
+            }
+            if self.rest {
+                for d in [Derivative::Velocity, Derivative::Acceleration] {
+                    out.push((p, d, vec![0.0; n_joints]));
                 }
             }
         }
         out
     }
 
-    /// Largest equality residual (rad) at `w`.
+    /// Equalities `a·z = b` for the start and final configuration at
+    /// `ends` (phases 0 and 1). Rest needs no row: the minimum-jerk timing
+    /// ([`TimeWarp`](super::phases::TimeWarp)) makes every trajectory rest
+    /// at the ends; [`LinearSet::equality_error`] still checks it.
+    pub fn equalities(&self, ends: &PhaseRows, mean: &DVector<f64>) -> Vec<(DVector<f64>, f64)> {
+        let mut out = Vec::new();
+        let conditions = self.end_conditions(ends.n_joints());
+        for (p, d, target) in conditions
+            .into_iter()
+            .filter(|(_, d, _)| *d == Derivative::Position)
+        {
+            let at_mean = ends.values(d, p, mean);
+            for j in 0..ends.n_joints() {
+                out.push((ends.row(d, p, j).clone(), target[j] - at_mean[j]));
+            }
+        }
+        out
+    }
+
+    /// Largest end-condition residual at `w`: rad for configurations,
+    /// rad/s and rad/s² for rest.
     pub fn equality_error(&self, ends: &PhaseRows, w: &DVector<f64>) -> f64 {
         let mut worst: f64 = 0.0;
-        for (p, target) in [(0, &self.start), (1, &self.final_configuration)] {
-            if let Some(q) = target {
-                let at = ends.position(p, w);
-                for (a, b) in at.iter().zip(q) {
-                    worst = worst.max((a - b).abs());
-                }
+        for (p, d, target) in self.end_conditions(ends.n_joints()) {
+            for (a, b) in ends.values(d, p, w).iter().zip(&target) {
+                worst = worst.max((a - b).abs());
             }
         }
         worst
@@ -237,6 +268,14 @@ impl LinearSet {
     }
 }
 
+/// How far row `r` can move in a step of `radius` (L1 norm times radius);
+/// [`SCREEN_MARGIN`] without a trust region.
+fn reach(rows: &PhaseRows, r: RowRef, radius: Option<f64>) -> f64 {
+    radius.map_or(SCREEN_MARGIN, |d| {
+        d * rows.row_l1(r.kind.derivative, r.phase, r.joint) + 1e-9
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -252,13 +291,17 @@ mod tests {
         .unwrap();
         let dist = example_distribution(&basis, 20, 2).unwrap();
         let wh = Whitening::new(&dist, Whitening::default_lambda(&dist)).unwrap();
-        let rows = PhaseRows::new(&basis, &wh, 7, 4.0, basis.phases());
+        let timing = (4.0, crate::optim::phases::TimeWarp::MinimumJerk);
+        let rows = PhaseRows::new(&basis, &wh, 7, timing, basis.phases());
         let set = LinearSet {
             lower: vec![-2.0; 7],
             upper: vec![2.0; 7],
             velocity: vec![1.0; 7],
+            acceleration: Some(vec![3.0; 7]),
+            jerk: Some(vec![30.0; 7]),
             start: None,
             final_configuration: None,
+            rest: true,
             bound_weights: false,
         };
         let n = wh.dim();
@@ -266,17 +309,25 @@ mod tests {
         let wk = wh.weights(&zk);
         let radius = 0.7;
         let kept = set.screen(&rows, &wk, Some(radius));
-        for r in LinearSet::all_rows(&rows) {
+        assert_eq!(set.kinds().len(), 8);
+        for r in set.all_rows(&rows) {
             let ineq = set.inequality(&rows, &dist.mean, r);
-            // a·z - b equals the excess at any z.
+            // a·z - b equals the excess (plus the rate buffer) at any z.
+            let d = r.kind.derivative;
+            let buffer = match d {
+                Derivative::Acceleration | Derivative::Jerk => {
+                    RATE_BUFFER * set.rate_bound(d, r.joint).unwrap()
+                }
+                _ => 0.0,
+            };
             let lhs = ineq.a.dot(&zk) - ineq.b;
-            assert!((lhs - set.excess(&rows, &wk, r)).abs() < 1e-9);
+            assert!((lhs - set.excess(&rows, &wk, r) - buffer).abs() < 1e-9);
             if !kept.contains(&r) {
                 // Worst corner of the box cannot violate it.
                 let corner = DVector::from_fn(n, |i, _| zk[i] + radius * ineq.a[i].signum());
                 assert!(ineq.a.dot(&corner) <= ineq.b + 1e-9);
             }
         }
-        assert!(kept.len() < LinearSet::all_rows(&rows).count());
+        assert!(kept.len() < set.all_rows(&rows).count());
     }
 }

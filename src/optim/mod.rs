@@ -1,14 +1,16 @@
 //! The Mahalanobis-closest trajectory optimiser: given a Gaussian prior over
 //! ProMP weights, find the weights closest to it (in Mahalanobis distance)
-//! whose trajectory respects the joint position and velocity limits, the
-//! start configuration, the goal and the clearance to every obstacle.
+//! whose trajectory respects the joint position, velocity, acceleration and
+//! jerk limits, rest at both ends, the start configuration, the goal (a
+//! position and an approach direction) and the clearance to every obstacle.
 //!
 //! - [`request`] — [`OptimizeRequest`] (DESIGN.md's JSON), [`SolverOptions`],
 //!   the request limits, and the validation into a [`Problem`].
 //! - [`problem`] — the whitened [`Problem`] (plain data).
 //! - [`whiten`] — `Σ + λI = L Lᵀ`, `w = μ + L z`: cost `|z|²`.
-//! - [`phases`] — joint positions / velocities as rows in `z` per phase.
-//! - [`linear`] — limit, velocity, equality and opt-in weight-bound rows.
+//! - [`phases`] — joint positions and their time derivatives as rows in `z` per phase.
+//! - [`linear`] — limit rows (position to jerk), end conditions, opt-in weight bounds.
+//! - [`duration`] — the shortest feasible duration when the limits make a request infeasible.
 //! - [`qp`] — one QP in Clarabel (CSC built directly).
 //! - [`dual_active_set`] — the warm-started inner QP solver (Goldfarb–Idnani).
 //! - [`qp_active_set`] — a [`qp::Qp`] solved by it (the SCP's intermediate steps).
@@ -32,6 +34,7 @@
 pub mod continuous;
 pub mod diagnose;
 pub mod dual_active_set;
+pub mod duration;
 mod evaluate;
 pub mod example;
 pub mod linear;
@@ -58,7 +61,7 @@ pub use report::{
     Closest, JointTrajectory, OptimizeResponse, SampleResult, Status, TrajectoryPoint,
     TrajectoryReport,
 };
-pub use request::{Goal, InnerSolver, OptimizeRequest, PriorSpec, SolverOptions};
+pub use request::{Boundary, Goal, InnerSolver, OptimizeRequest, PriorSpec, SolverOptions};
 pub use solution::{Solution, SolveControl, SolveStats};
 pub use tolerances::FEASIBILITY_TOLERANCE;
 
@@ -91,9 +94,18 @@ pub fn optimize_with(
             weights: mean,
             samples: Vec::new(),
             reason: Some(reason),
+            min_duration_s: None,
         });
     }
-    let solution = problem.solve(ctl)?;
+    let mut solution = problem.solve(ctl)?;
+    let mut min_duration_s = None;
+    if solution.status != Status::Optimal {
+        if let Some(d) = problem.duration_diagnosis() {
+            solution.status = Status::Infeasible;
+            solution.reason = Some(d.reason);
+            min_duration_s = d.min_duration_s;
+        }
+    }
     let samples = if problem.extra_samples() > 0 {
         problem.feasible_samples(problem.extra_samples(), ctl)?
     } else {
@@ -108,5 +120,6 @@ pub fn optimize_with(
         prior_mean_report,
         samples,
         reason: solution.reason,
+        min_duration_s,
     })
 }

@@ -1,7 +1,20 @@
 //! The trajectory as an affine function of the whitened coordinates at a
-//! set of phases: `q_j(z_p) = ψ_pᵀ w_j` and `dq_j/dt = ψ'_pᵀ w_j / T_d`,
-//! with `w = μ + L z`, so each joint position or velocity at a phase is one
-//! row `a·z + c`.
+//! set of times: the `k`-th time derivative of joint `j` at time fraction
+//! `τ_p` (position, velocity, acceleration, jerk) is a fixed combination of
+//! the basis derivatives there, applied to `w_j`, with `w = μ + L z`, so
+//! each one is a row `a·z + c`.
+//!
+//! **Timing.** The ProMP gives the path as a function of the phase `s`;
+//! the [`TimeWarp`] says when the robot is where: `q(t) = Ψ(s(t/T)) w`. With
+//! `boundary: free` the phase runs at constant speed, `s = τ` (the paper's
+//! timing). With `boundary: rest` it follows the minimum-jerk profile
+//! `s = 10τ³ − 15τ⁴ + 6τ⁵`, whose first and second derivatives vanish at
+//! both ends: every trajectory starts and ends with zero velocity and
+//! acceleration, for any weights, without a constraint row and without
+//! moving the path (positions, clearance, goal) by a millimetre. By the
+//! chain rule (`s_k = dᵏs/dτᵏ`):
+//! `q̇ = ψ⁽¹⁾ s₁ w / T`, `q̈ = (ψ⁽²⁾ s₁² + ψ⁽¹⁾ s₂) w / T²`,
+//! `q⃛ = (ψ⁽³⁾ s₁³ + 3 ψ⁽²⁾ s₁ s₂ + ψ⁽¹⁾ s₃) w / T³`.
 //!
 //! The optimisation set starts as the request's `n_samples` grid and grows
 //! by the phases that dense verification flags.
@@ -10,46 +23,120 @@ use super::whiten::Whitening;
 use crate::promp::Basis;
 use nalgebra::{DMatrix, DVector};
 
+/// Which time derivative of the joint trajectory a row is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Derivative {
+    /// `q` (rad).
+    Position = 0,
+    /// `dq/dt` (rad/s).
+    Velocity = 1,
+    /// `d²q/dt²` (rad/s²).
+    Acceleration = 2,
+    /// `d³q/dt³` (rad/s³).
+    Jerk = 3,
+}
+
+impl Derivative {
+    /// All four, in order.
+    pub const ALL: [Derivative; 4] = [
+        Derivative::Position,
+        Derivative::Velocity,
+        Derivative::Acceleration,
+        Derivative::Jerk,
+    ];
+
+    /// The order of the derivative (0 to 3).
+    pub fn order(self) -> usize {
+        self as usize
+    }
+
+    /// The word a message uses.
+    pub fn name(self) -> &'static str {
+        match self {
+            Derivative::Position => "position",
+            Derivative::Velocity => "velocity",
+            Derivative::Acceleration => "acceleration",
+            Derivative::Jerk => "jerk",
+        }
+    }
+}
+
+/// How the phase of the ProMP advances with time (see the module docs).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum TimeWarp {
+    /// `s = τ`: the ends move at whatever speed the weights give.
+    Identity,
+    /// `s = 10τ³ − 15τ⁴ + 6τ⁵`: rest at both ends.
+    #[default]
+    MinimumJerk,
+}
+
+impl TimeWarp {
+    /// `[s, ds/dτ, d²s/dτ², d³s/dτ³]` at `tau` in [0, 1].
+    pub fn at(self, tau: f64) -> [f64; 4] {
+        match self {
+            TimeWarp::Identity => [tau, 1.0, 0.0, 0.0],
+            TimeWarp::MinimumJerk => {
+                let (t2, t3) = (tau * tau, tau * tau * tau);
+                [
+                    t3 * (10.0 - 15.0 * tau + 6.0 * t2),
+                    30.0 * t2 * (1.0 - tau) * (1.0 - tau),
+                    60.0 * tau * (1.0 - tau) * (1.0 - 2.0 * tau),
+                    60.0 * (1.0 - 6.0 * tau + 6.0 * t2),
+                ]
+            }
+        }
+    }
+
+    /// The basis rows of the trajectory's time derivatives at time fraction
+    /// `tau` of a `duration`-second motion: index `k` maps the weights of
+    /// one joint to `dᵏq/dtᵏ` (chain rule, module docs).
+    pub fn time_rows(self, basis: &Basis, tau: f64, duration: f64) -> [DVector<f64>; 4] {
+        let [s, s1, s2, s3] = self.at(tau);
+        let [p0, p1, p2, p3] = basis.rows_at(s);
+        let t = duration;
+        let v = &p1 * (s1 / t);
+        let a = (&p2 * (s1 * s1) + &p1 * s2) / (t * t);
+        let j = (&p3 * (s1 * s1 * s1) + &p2 * (3.0 * s1 * s2) + &p1 * s3) / (t * t * t);
+        [p0, v, a, j]
+    }
+}
+
 /// Basis rows (and their whitened constraint rows) at a set of phases.
 #[derive(Clone, Debug)]
 pub struct PhaseRows {
     n_joints: usize,
     n_basis: usize,
     duration: f64,
+    warp: TimeWarp,
     phases: Vec<f64>,
-    psi: Vec<DVector<f64>>,
-    dpsi: Vec<DVector<f64>>,
-    /// Row `p * n_joints + j`: `∂q_j(z_p)/∂z`.
-    pos: Vec<DVector<f64>>,
-    /// Row `p * n_joints + j`: `∂(dq_j/dt)(z_p)/∂z`.
-    vel: Vec<DVector<f64>>,
-    /// L1 norms of `pos` and `vel` rows (how far a row can move per unit
-    /// of trust region).
-    pos_l1: Vec<f64>,
-    vel_l1: Vec<f64>,
+    /// `basis[k][p]`: the basis row of `dᵏq/dtᵏ` at `τ_p` ([`TimeWarp::time_rows`]).
+    basis: [Vec<DVector<f64>>; 4],
+    /// `rows[k][p * n_joints + j]`: `∂(dᵏq_j/dtᵏ)(z_p)/∂z`.
+    rows: [Vec<DVector<f64>>; 4],
+    /// L1 norms of `rows` (how far a row can move per unit of trust region).
+    l1: [Vec<f64>; 4],
 }
 
 impl PhaseRows {
-    /// Rows at `phases` for `n_joints` joints of `basis`, velocities for a
-    /// motion of `duration` seconds.
+    /// Rows at time fractions `phases` for `n_joints` joints of `basis`,
+    /// time derivatives for a motion of `duration` seconds timed by `warp`.
     pub fn new(
         basis: &Basis,
         whitening: &Whitening,
         n_joints: usize,
-        duration: f64,
+        (duration, warp): (f64, TimeWarp),
         phases: &[f64],
     ) -> PhaseRows {
         let mut rows = PhaseRows {
             n_joints,
             n_basis: basis.n_basis(),
             duration,
+            warp,
             phases: Vec::new(),
-            psi: Vec::new(),
-            dpsi: Vec::new(),
-            pos: Vec::new(),
-            vel: Vec::new(),
-            pos_l1: Vec::new(),
-            vel_l1: Vec::new(),
+            basis: Default::default(),
+            rows: Default::default(),
+            l1: Default::default(),
         };
         for &p in phases {
             rows.push(basis, whitening, p);
@@ -62,22 +149,22 @@ impl PhaseRows {
         if self.phases.iter().any(|p| (p - phase).abs() < 1e-12) {
             return;
         }
-        let psi = basis.row_at(phase);
-        let dpsi = basis.derivative_row_at(phase) / self.duration;
         let l = whitening.factor();
         let nb = self.n_basis;
-        for j in 0..self.n_joints {
-            let block = l.rows(j * nb, nb);
-            let pos = block.tr_mul(&psi);
-            let vel = block.tr_mul(&dpsi);
-            self.pos_l1.push(pos.lp_norm(1));
-            self.vel_l1.push(vel.lp_norm(1));
-            self.pos.push(pos);
-            self.vel.push(vel);
+        for (k, psi) in self
+            .warp
+            .time_rows(basis, phase, self.duration)
+            .into_iter()
+            .enumerate()
+        {
+            for j in 0..self.n_joints {
+                let row = l.rows(j * nb, nb).tr_mul(&psi);
+                self.l1[k].push(row.lp_norm(1));
+                self.rows[k].push(row);
+            }
+            self.basis[k].push(psi);
         }
         self.phases.push(phase);
-        self.psi.push(psi);
-        self.dpsi.push(dpsi);
     }
 
     /// Number of phases.
@@ -100,24 +187,19 @@ impl PhaseRows {
         self.duration
     }
 
+    /// `∂(dᵏq_j/dtᵏ)/∂z` at phase index `p`.
+    pub fn row(&self, d: Derivative, p: usize, j: usize) -> &DVector<f64> {
+        &self.rows[d.order()][p * self.n_joints + j]
+    }
+
+    /// `|∂(dᵏq_j/dtᵏ)/∂z|₁` at phase index `p`.
+    pub fn row_l1(&self, d: Derivative, p: usize, j: usize) -> f64 {
+        self.l1[d.order()][p * self.n_joints + j]
+    }
+
     /// `∂q_j/∂z` at phase index `p`.
     pub fn position_row(&self, p: usize, j: usize) -> &DVector<f64> {
-        &self.pos[p * self.n_joints + j]
-    }
-
-    /// `∂(dq_j/dt)/∂z` at phase index `p`.
-    pub fn velocity_row(&self, p: usize, j: usize) -> &DVector<f64> {
-        &self.vel[p * self.n_joints + j]
-    }
-
-    /// `|∂q_j/∂z|₁` at phase index `p`.
-    pub fn position_row_l1(&self, p: usize, j: usize) -> f64 {
-        self.pos_l1[p * self.n_joints + j]
-    }
-
-    /// `|∂(dq_j/dt)/∂z|₁` at phase index `p`.
-    pub fn velocity_row_l1(&self, p: usize, j: usize) -> f64 {
-        self.vel_l1[p * self.n_joints + j]
+        self.row(Derivative::Position, p, j)
     }
 
     /// Number of joints.
@@ -127,39 +209,25 @@ impl PhaseRows {
 
     /// `∂q/∂z` at phase index `p` (`n_joints x dim z`).
     pub fn position_jacobian(&self, p: usize) -> DMatrix<f64> {
-        let n = self.pos.first().map_or(0, |r| r.len());
-        DMatrix::from_fn(self.n_joints, n, |j, c| self.pos[p * self.n_joints + j][c])
+        let pos = &self.rows[0];
+        let n = pos.first().map_or(0, |r| r.len());
+        DMatrix::from_fn(self.n_joints, n, |j, c| pos[p * self.n_joints + j][c])
     }
 
     /// Joint positions at phase index `p` for weights `w`.
     pub fn position(&self, p: usize, w: &DVector<f64>) -> Vec<f64> {
-        self.apply(&self.psi[p], w)
+        self.values(Derivative::Position, p, w)
     }
 
-    /// Joint velocities (rad/s) at phase index `p` for weights `w`.
-    pub fn velocity(&self, p: usize, w: &DVector<f64>) -> Vec<f64> {
-        self.apply(&self.dpsi[p], w)
+    /// The `d` derivative of every joint at phase index `p` for weights `w`.
+    pub fn values(&self, d: Derivative, p: usize, w: &DVector<f64>) -> Vec<f64> {
+        (0..self.n_joints).map(|j| self.value(d, p, j, w)).collect()
     }
 
-    /// Position (rad) of joint `j` at phase index `p` for weights `w`.
-    pub fn joint_position(&self, p: usize, j: usize, w: &DVector<f64>) -> f64 {
-        self.apply_joint(&self.psi[p], j, w)
-    }
-
-    /// Velocity (rad/s) of joint `j` at phase index `p` for weights `w`.
-    pub fn joint_velocity(&self, p: usize, j: usize, w: &DVector<f64>) -> f64 {
-        self.apply_joint(&self.dpsi[p], j, w)
-    }
-
-    fn apply_joint(&self, row: &DVector<f64>, j: usize, w: &DVector<f64>) -> f64 {
+    /// The `d` derivative of joint `j` at phase index `p` for weights `w`.
+    pub fn value(&self, d: Derivative, p: usize, j: usize, w: &DVector<f64>) -> f64 {
         let nb = self.n_basis;
-        row.dot(&w.rows(j * nb, nb))
-    }
-
-    fn apply(&self, row: &DVector<f64>, w: &DVector<f64>) -> Vec<f64> {
-        (0..self.n_joints)
-            .map(|j| self.apply_joint(row, j, w))
-            .collect()
+        self.basis[d.order()][p].dot(&w.rows(j * nb, nb))
     }
 }
 
@@ -169,32 +237,52 @@ mod tests {
     use crate::promp::{example::example_distribution, PrompConfig};
 
     #[test]
-    fn rows_reproduce_positions_and_velocities_of_the_weights() {
+    fn rows_reproduce_every_derivative_of_the_weights() {
         let basis = Basis::new(&PrompConfig::default()).unwrap();
         let dist = example_distribution(&basis, 20, 5).unwrap();
         let wh = Whitening::new(&dist, Whitening::default_lambda(&dist)).unwrap();
-        let rows = PhaseRows::new(&basis, &wh, 7, 4.0, &[0.0, 0.31, 1.0]);
+        let rows = PhaseRows::new(&basis, &wh, 7, (4.0, TimeWarp::Identity), &[0.0, 0.31, 1.0]);
         let z = DVector::from_fn(wh.dim(), |i, _| (i as f64 * 0.37).sin());
         let w = wh.weights(&z);
         let w0 = wh.weights(&DVector::zeros(wh.dim()));
-        for p in 0..rows.len() {
-            let q = rows.position(p, &w);
-            let q0 = rows.position(p, &w0);
-            let v = rows.velocity(p, &w);
-            let v0 = rows.velocity(p, &w0);
-            for j in 0..7 {
-                assert!((q0[j] + rows.position_row(p, j).dot(&z) - q[j]).abs() < 1e-9);
-                assert!((v0[j] + rows.velocity_row(p, j).dot(&z) - v[j]).abs() < 1e-9);
+        for d in Derivative::ALL {
+            for p in 0..rows.len() {
+                for j in 0..7 {
+                    let affine = rows.value(d, p, j, &w0) + rows.row(d, p, j).dot(&z);
+                    let direct = rows.value(d, p, j, &w);
+                    assert!(
+                        (affine - direct).abs() < 1e-9 * (1.0 + direct.abs()),
+                        "{d:?}"
+                    );
+                }
             }
         }
-        // Velocity = central difference of positions / duration.
-        let eps = 1e-6;
-        let r = PhaseRows::new(&basis, &wh, 7, 4.0, &[0.5 - eps, 0.5, 0.5 + eps]);
-        let (a, b) = (r.position(0, &w), r.position(2, &w));
-        let v = r.velocity(1, &w);
-        for j in 0..7 {
-            let fd = (b[j] - a[j]) / (2.0 * eps) / 4.0;
-            assert!((fd - v[j]).abs() < 1e-5 * (1.0 + v[j].abs()), "joint {j}");
+        // Each derivative = central difference of the one below / duration,
+        // with either timing.
+        let eps = 1e-5;
+        for warp in [TimeWarp::Identity, TimeWarp::MinimumJerk] {
+            for tau in [0.03, 0.5, 0.93] {
+                let taus = [tau - eps, tau, tau + eps];
+                let r = PhaseRows::new(&basis, &wh, 7, (4.0, warp), &taus);
+                for (lower, upper) in Derivative::ALL.into_iter().zip(&Derivative::ALL[1..]) {
+                    let (a, b) = (r.values(lower, 0, &w), r.values(lower, 2, &w));
+                    let v = r.values(*upper, 1, &w);
+                    for j in 0..7 {
+                        let fd = (b[j] - a[j]) / (2.0 * eps) / 4.0;
+                        let tol = 1e-4 * (1.0 + v[j].abs());
+                        assert!((fd - v[j]).abs() < tol, "{warp:?} {upper:?} joint {j}");
+                    }
+                }
+            }
+        }
+        // The minimum-jerk timing rests at both ends, whatever the weights,
+        // and keeps the path's end points.
+        let ends = PhaseRows::new(&basis, &wh, 7, (4.0, TimeWarp::MinimumJerk), &[0.0, 1.0]);
+        for p in 0..2 {
+            for d in [Derivative::Velocity, Derivative::Acceleration] {
+                assert!(ends.values(d, p, &w).iter().all(|v| v.abs() < 1e-12));
+            }
+            assert_eq!(ends.position(p, &w), rows.position(2 * p, &w));
         }
         let mean = dist.trajectory_mean(&basis);
         let q_end = rows.position(2, &w0);

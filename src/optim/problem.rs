@@ -25,16 +25,18 @@ pub struct Problem {
     pub(crate) grid: PhaseRows,
     /// Phases 0 and 1 (start / final equalities, goal).
     pub(crate) ends: PhaseRows,
-    /// Dense verification phases and their basis rows.
+    /// Dense verification phases and their basis rows, `dense[k]` the
+    /// `k`-th time derivative ([`Derivative::order`](super::phases::Derivative::order)).
     pub(crate) dense_phases: Vec<f64>,
-    pub(crate) dense_psi: DMatrix<f64>,
-    pub(crate) dense_dpsi: DMatrix<f64>,
+    pub(crate) dense: [DMatrix<f64>; 4],
     pub(crate) linear: LinearSet,
     pub(crate) clearance_m: f64,
     pub(crate) activation_m: f64,
     pub(crate) goal: Option<Goal>,
     pub(crate) options: SolverOptions,
     pub(crate) duration: f64,
+    /// How the phase advances with time (rest-to-rest or free ends).
+    pub(crate) warp: super::phases::TimeWarp,
     /// How answers write the trajectory.
     pub(crate) trajectory_format: super::report::TrajectoryFormat,
     pub(crate) n_extra_samples: usize,
@@ -77,6 +79,13 @@ impl Problem {
         self.n_extra_samples
     }
 
+    /// The goal's approach axis (unit) and angle tolerance (rad), if any.
+    pub fn approach(&self) -> Option<(nalgebra::Vector3<f64>, f64)> {
+        let goal = self.goal.as_ref()?;
+        let axis = nalgebra::Vector3::from(goal.approach_axis?);
+        Some((axis.normalize(), goal.approach_tolerance_rad))
+    }
+
     /// Mahalanobis distance `sqrt((w-μ)ᵀ(Σ+λI)⁻¹(w-μ))`.
     pub fn mahalanobis(&self, weights: &[f64]) -> f64 {
         self.whitening
@@ -97,10 +106,19 @@ impl Problem {
             (Some(_), None) => false,
             (None, _) => true,
         };
+        let approach_ok = match (self.approach(), report.goal_angle_error_rad) {
+            (Some((_, limit)), Some(angle)) => angle <= limit + tol,
+            (Some(_), None) => false,
+            (None, _) => true,
+        };
+        let ratio_ok = |r: Option<f64>| r.is_none_or(|r| r <= 1.0 + tol);
         clear_ok
             && goal_ok
+            && approach_ok
             && report.max_joint_limit_violation_rad <= tol
             && report.max_velocity_ratio <= 1.0 + tol
+            && ratio_ok(report.max_acceleration_ratio)
+            && ratio_ok(report.max_jerk_ratio)
             && report.equality_error_rad <= tol
             && report.weight_bound_excess <= tol
     }

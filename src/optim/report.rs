@@ -191,10 +191,20 @@ pub struct TrajectoryReport {
     /// Largest excursion beyond the joint limits minus the requested margin
     /// (rad, 0 when inside).
     pub max_joint_limit_violation_rad: f64,
-    /// Largest `|dq/dt| / v_max` over joints and time.
+    /// Largest `|dq/dt| / v_max` over joints and time (`v_max` scaled by
+    /// `velocity_scaling`).
     pub max_velocity_ratio: f64,
+    /// Largest `|d²q/dt²| / a_max` over joints and time (`a_max` scaled by
+    /// `acceleration_scaling`); `None` without acceleration limits.
+    pub max_acceleration_ratio: Option<f64>,
+    /// Largest `|d³q/dt³| / j_max` over joints and time; `None` without
+    /// jerk limits.
+    pub max_jerk_ratio: Option<f64>,
     /// TCP distance to the goal at the end (m); `None` without a goal.
     pub goal_error_m: Option<f64>,
+    /// Angle (rad) between the gripper's z axis at the end and
+    /// `goal.approach_axis`; `None` without an approach axis.
+    pub goal_angle_error_rad: Option<f64>,
     /// SCP iterations (QPs solved) that produced this trajectory.
     pub iterations: usize,
     /// Wall-clock solve time (ms); not deterministic.
@@ -207,8 +217,10 @@ pub struct TrajectoryReport {
     /// converged point; absent for other statuses.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub final_qp: Option<FinalQp>,
-    /// Largest start / final configuration error (rad); not serialised
-    /// (the contract has no such field) but checked by `is_feasible`.
+    /// Largest end-condition error: start / final configuration (rad) and,
+    /// rest-to-rest, end velocity (rad/s) and acceleration (rad/s²); not
+    /// serialised (the contract has no such field) but checked by
+    /// `is_feasible`.
     #[serde(skip)]
     pub equality_error_rad: f64,
     /// Largest opt-in weight-bound excess; not serialised.
@@ -314,6 +326,12 @@ pub struct OptimizeResponse {
     /// Why the status is not `optimal`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub reason: Option<String>,
+    /// With status `infeasible` because the velocity, acceleration or jerk
+    /// limits cannot hold over `duration_s`: the shortest duration (s) for
+    /// which they, the boundary conditions and the start / final
+    /// configuration can all hold.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub min_duration_s: Option<f64>,
 }
 
 impl OptimizeResponse {

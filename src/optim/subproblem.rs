@@ -46,6 +46,11 @@ impl Problem {
             work.qp.cones.push(cone);
             model_slack += excess;
         }
+        if let Some((row, excess)) = self.approach_row(at.eval, at.rho) {
+            work.qp.inequalities.push(row);
+            work.ids.push(RowId::Other);
+            model_slack += excess;
+        }
         let model_here = at.eval.cost + at.rho * model_slack;
         self.first_working_set(&mut work, at, hint, target);
         let settings = QpSettings {
@@ -61,7 +66,12 @@ impl Problem {
             let sol = if at.certify {
                 certifying_solve(&work.qp, &settings)?
             } else {
-                work.qp.solve_active_set(&warm, mu)?
+                // Infeasibility is a proof: Clarabel (the solver of record)
+                // confirms what the active-set method reports.
+                match work.qp.solve_active_set(&warm, mu) {
+                    Err(QpFailure::Infeasible) => certifying_solve(&work.qp, &settings)?,
+                    other => other?,
+                }
             };
             stats.count(&sol);
             warm = sol.row_states.clone().unwrap_or_default();
@@ -189,6 +199,21 @@ impl Problem {
             penalty: rho,
         };
         Some((cone, ge.buffered_excess))
+    }
+
+    /// The approach direction linearised at `eval`,
+    /// `a·u + ∇(a·u)·(z - z_k) >= cos(buffered tolerance)` with an
+    /// L1-penalised slack, and its excess.
+    fn approach_row(&self, eval: &GridEval, rho: f64) -> Option<(Inequality, f64)> {
+        let ap = eval.goal.as_ref()?.approach.as_ref()?;
+        let g = DVector::from_column_slice(&ap.gradient);
+        let a = self.ends.position_jacobian(1).tr_mul(&g);
+        let row = Inequality {
+            b: ap.cosine - a.dot(&eval.z) - ap.target,
+            a: -a,
+            penalty: Some(rho),
+        };
+        Some((row, ap.buffered_excess))
     }
 
     /// Add `candidates` (thinned in time, scored by their excess at `w`)
@@ -430,7 +455,6 @@ pub(super) struct Linearisation<'a> {
 mod tests {
     use super::*;
     use crate::optim::example::{typical_request, ExampleSettings};
-    use crate::optim::linear::LinearSet;
 
     /// The QP of every candidate row, built without the working set.
     fn full_qp(p: &Problem, at: &Linearisation) -> Qp {
@@ -438,9 +462,13 @@ mod tests {
         let mut qp = Qp::new(p.whitening.dim());
         qp.center = at.centre.clone();
         qp.equalities = p.linear.equalities(&p.ends, &p.prior.mean);
-        qp.inequalities = LinearSet::all_rows(at.rows)
+        qp.inequalities = p
+            .linear
+            .all_rows(at.rows)
             .map(|r| p.linear.inequality(at.rows, &p.prior.mean, r))
             .collect();
+        qp.inequalities
+            .extend(p.approach_row(at.eval, at.rho).map(|(row, _)| row));
         qp.inequalities.extend(
             p.clearance_rows(at.rows, at.eval, target, at.rho)
                 .into_iter()

@@ -22,6 +22,15 @@ pub fn buffered_tolerance(tolerance_m: f64) -> f64 {
     tolerance_m - CLEARANCE_BUFFER_M.min(0.5 * tolerance_m)
 }
 
+/// Angle (rad) the QP keeps inside `goal.approach_tolerance_rad` (at most
+/// half the tolerance), for the same reason as [`CLEARANCE_BUFFER_M`].
+pub const APPROACH_BUFFER_RAD: f64 = 2e-4;
+
+/// Approach tolerance the QP aims for.
+pub fn buffered_angle(tolerance_rad: f64) -> f64 {
+    tolerance_rad - APPROACH_BUFFER_RAD.min(0.5 * tolerance_rad)
+}
+
 // SCP convergence and trust region.
 
 /// An iterate whose next step is predicted to improve the merit by less

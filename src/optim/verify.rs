@@ -4,6 +4,7 @@
 //! between the samples ([`super::continuous`]). The report the user sees
 //! always comes from here.
 
+use super::phases::Derivative;
 use super::problem::Problem;
 use super::report::{
     Closest, JointTrajectory, TrajectoryFormat, TrajectoryPoint, TrajectoryReport,
@@ -49,11 +50,19 @@ impl Problem {
             };
         }
         let wm = self.weight_matrix(w);
-        let q = &self.dense_psi * &wm;
-        let qd = &self.dense_dpsi * &wm;
+        let q = &self.dense[0] * &wm;
+        let qd = &self.dense[1] * &wm;
         let mut flagged = vec![false; self.dense_phases.len()];
         let limit = self.limit_violation(&q, &mut flagged);
-        let ratio = self.velocity_ratio(&qd, &mut flagged);
+        let ratio = self.rate_ratio(Derivative::Velocity, &qd, &mut flagged);
+        let mut limited_ratio = |d: Derivative| {
+            self.linear.rate_bound(d, 0).map(|_| {
+                let m = &self.dense[d.order()] * &wm;
+                self.rate_ratio(d, &m, &mut flagged)
+            })
+        };
+        let acceleration_ratio = limited_ratio(Derivative::Acceleration);
+        let jerk_ratio = limited_ratio(Derivative::Jerk);
         let (min_clearance, closest, per_phase) = self.dense_clearance(&q, &mut flagged);
         let certificate =
             min_clearance.map(|_| self.continuous_certificate(&wm, &q, &qd, &per_phase));
@@ -64,7 +73,10 @@ impl Problem {
             continuous_margin_m: certificate.as_ref().map(|c| c.margin_m),
             max_joint_limit_violation_rad: limit,
             max_velocity_ratio: ratio,
+            max_acceleration_ratio: acceleration_ratio,
+            max_jerk_ratio: jerk_ratio,
             goal_error_m: self.goal_error(w),
+            goal_angle_error_rad: self.goal_angle_error(w),
             verified_samples: self.dense_phases.len(),
             equality_error_rad: self.linear.equality_error(&self.ends, w),
             weight_bound_excess: self
@@ -101,11 +113,14 @@ impl Problem {
         worst
     }
 
-    fn velocity_ratio(&self, qd: &DMatrix<f64>, flagged: &mut [bool]) -> f64 {
+    /// Largest `|value| / bound` of derivative `d` (`values`: one row per
+    /// dense phase); flags the phases above 1.
+    fn rate_ratio(&self, d: Derivative, values: &DMatrix<f64>, flagged: &mut [bool]) -> f64 {
         let mut worst: f64 = 0.0;
         for (p, flag) in flagged.iter_mut().enumerate() {
-            for j in 0..qd.ncols() {
-                let ratio = qd[(p, j)].abs() / self.linear.velocity[j];
+            for j in 0..values.ncols() {
+                let bound = self.linear.rate_bound(d, j).unwrap_or(f64::INFINITY);
+                let ratio = values[(p, j)].abs() / bound;
                 if ratio > 1.0 + FEASIBILITY_TOLERANCE {
                     *flag = true;
                 }
@@ -190,33 +205,35 @@ impl Problem {
         )
     }
 
-    /// Joint accelerations at phase `z`, only where the answer's format
-    /// writes them (ROS 2); empty otherwise.
-    fn accelerations_at(&self, z: f64, wm: &DMatrix<f64>) -> Vec<f64> {
-        if self.trajectory_format != TrajectoryFormat::Ros2 {
-            return Vec::new();
-        }
-        let qdd = self.basis.second_derivative_row_at(z).transpose() * wm
-            / (self.duration * self.duration);
-        qdd.iter().copied().collect()
+    /// Angle (rad) between the gripper's z axis at phase 1 and the goal's
+    /// approach axis.
+    pub(crate) fn goal_angle_error(&self, w: &DVector<f64>) -> Option<f64> {
+        let (axis, _) = self.approach()?;
+        let q = self.ends.position(1, w);
+        let z = self.robot.tcp_pose(&q).rotation * nalgebra::Vector3::z();
+        Some(z.dot(&axis).clamp(-1.0, 1.0).acos())
     }
 
-    /// The trajectory of `w` on the request's grid, ROS-shaped.
+    /// The trajectory of `w` on the request's grid (equal time steps),
+    /// ROS-shaped; accelerations only where the answer's format writes them
+    /// (ROS 2).
     pub fn trajectory(&self, weights: &[f64]) -> JointTrajectory {
         let w = DVector::from_column_slice(weights);
         let wm = self.weight_matrix(&w);
-        let q = self.basis.matrix() * &wm;
-        let qd = self.basis.derivative() * &wm / self.duration;
+        let row = |m: DVector<f64>| (m.transpose() * &wm).iter().copied().collect::<Vec<f64>>();
+        let ros2 = self.trajectory_format == TrajectoryFormat::Ros2;
         let points = self
             .basis
             .phases()
             .iter()
-            .enumerate()
-            .map(|(p, &z)| TrajectoryPoint {
-                positions: q.row(p).iter().cloned().collect(),
-                velocities: qd.row(p).iter().cloned().collect(),
-                accelerations: self.accelerations_at(z, &wm),
-                time_from_start: z * self.duration,
+            .map(|&tau| {
+                let [psi, dpsi, ddpsi, _] = self.warp.time_rows(&self.basis, tau, self.duration);
+                TrajectoryPoint {
+                    positions: row(psi),
+                    velocities: row(dpsi),
+                    accelerations: if ros2 { row(ddpsi) } else { Vec::new() },
+                    time_from_start: tau * self.duration,
+                }
             })
             .collect();
         JointTrajectory {

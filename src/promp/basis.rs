@@ -103,6 +103,19 @@ impl Basis {
         psi_second_derivative(&self.config, z)
     }
 
+    /// `d³ psi / dz³` at any phase (divide by the duration cubed for jerks).
+    pub fn third_derivative_row_at(&self, z: f64) -> DVector<f64> {
+        psi_third_derivative(&self.config, z)
+    }
+
+    /// `psi` and its first three phase derivatives at `z` (index = order).
+    pub fn rows_at(&self, z: f64) -> [DVector<f64>; 4] {
+        let (psi, d1) = psi_and_derivative(&self.config, z);
+        let d2 = psi_second_derivative(&self.config, z);
+        let d3 = psi_third_derivative(&self.config, z);
+        [psi, d1, d2, d3]
+    }
+
     /// The same basis resampled on `n_samples` phases (dense verification).
     pub fn resampled(&self, n_samples: usize) -> Result<Basis> {
         Basis::new(&PrompConfig {
@@ -152,6 +165,26 @@ fn psi_second_derivative(config: &PrompConfig, z: f64) -> DVector<f64> {
     )
 }
 
+/// `psi'''(z)`: differentiating `psi_i'' = psi_i' (g_i - ḡ) - psi_i S₁`
+/// with `S₁ = Σ_j psi_j' g_j` (so `ḡ' = S₁ - 1/h` and, as `Σ_j psi_j' = 0`,
+/// `S₁' = Σ_j psi_j'' g_j = S₂`) gives
+/// `psi_i''' = psi_i'' (g_i - ḡ) - 2 psi_i' S₁ - psi_i S₂`.
+fn psi_third_derivative(config: &PrompConfig, z: f64) -> DVector<f64> {
+    let (psi, dpsi) = psi_and_derivative(config, z);
+    let ddpsi = psi_second_derivative(config, z);
+    let nb = config.n_basis;
+    let g: Vec<f64> = (0..nb)
+        .map(|i| -(z - i as f64 / (nb - 1) as f64) / config.width)
+        .collect();
+    let mean_g: f64 = psi.iter().zip(&g).map(|(p, g)| p * g).sum();
+    let s1: f64 = dpsi.iter().zip(&g).map(|(d, g)| d * g).sum();
+    let s2: f64 = ddpsi.iter().zip(&g).map(|(d, g)| d * g).sum();
+    DVector::from_iterator(
+        nb,
+        (0..nb).map(|i| ddpsi[i] * (g[i] - mean_g) - 2.0 * dpsi[i] * s1 - psi[i] * s2),
+    )
+}
+
 /// `(PhiᵀPhi + rI)⁻¹ Phiᵀ`, computed from the SVD of `Phi` as
 /// `V diag(s / (s² + r)) Uᵀ` so that the basis' poor conditioning (width
 /// 0.07 overlaps heavily: cond(PhiᵀPhi) ~ 5e8) is not squared.
@@ -184,6 +217,22 @@ mod tests {
             assert!((fd - &exact).amax() < 1e-5 * scale, "z {z}");
             // The rows sum to one, so the derivatives sum to zero.
             assert!(exact.sum().abs() < 1e-9 * scale);
+        }
+    }
+
+    #[test]
+    fn the_third_derivative_matches_finite_differences_of_the_second() {
+        let b = basis();
+        let step = 1e-5;
+        for k in 0..=40 {
+            let z = k as f64 / 40.0;
+            let fd = (b.second_derivative_row_at(z + step) - b.second_derivative_row_at(z - step))
+                / (2.0 * step);
+            let rows = b.rows_at(z);
+            let scale = rows[3].amax().max(1.0);
+            assert!((fd - &rows[3]).amax() < 1e-5 * scale, "z {z}");
+            assert!(rows[3].sum().abs() < 1e-9 * scale);
+            assert_eq!(rows[2], b.second_derivative_row_at(z));
         }
     }
 

@@ -7,6 +7,8 @@
 //! - [`fk`]: forward kinematics of every link frame ([`Frames`]);
 //! - [`jacobian`]: Jacobians of points attached to links and of the TCP;
 //! - [`ik`]: inverse kinematics for a TCP position and approach axis;
+//! - [`limits_file`]: acceleration and jerk limits from a MoveIt-style
+//!   `joint_limits.yaml` beside the URDF;
 //! - [`collision`]: the link collision geometry ([`LinkShape`]);
 //! - [`mesh`], [`mesh_files`] and [`hull`]: collision meshes (STL, OBJ),
 //!   where their files are found, and the convex hull that contains each
@@ -29,6 +31,7 @@ pub mod hull_query;
 pub mod hull_topology;
 pub mod ik;
 pub mod jacobian;
+pub mod limits_file;
 pub mod mesh;
 pub mod mesh_files;
 pub mod urdf;
@@ -90,8 +93,9 @@ pub const PANDA_MESHES: &[(&str, &[u8])] = &[
 /// annotated demonstrations.
 pub const PANDA_HOME: [f64; 7] = [0.0348, -1.0102, -0.1525, -2.5334, -0.1583, 2.8798, 0.0543];
 
-/// Position and velocity limits of one actuated joint (rad, rad/s; m, m/s
-/// for prismatic joints).
+/// Limits of one actuated joint (rad, rad/s, rad/s², rad/s³; metres for
+/// prismatic joints). Positions and velocity come from the URDF,
+/// acceleration and jerk from the [`limits_file`] (none without one).
 #[derive(Clone, Copy, Debug, Serialize, PartialEq)]
 pub struct JointLimit {
     /// Lowest position.
@@ -100,6 +104,10 @@ pub struct JointLimit {
     pub upper: f64,
     /// Largest speed (absolute).
     pub velocity: f64,
+    /// Largest acceleration (absolute), if the limits file gives one.
+    pub acceleration: Option<f64>,
+    /// Largest jerk (absolute), if the limits file gives one.
+    pub jerk: Option<f64>,
 }
 
 impl JointLimit {
@@ -206,6 +214,7 @@ impl Robot {
                     &MeshFiles::Embedded(PANDA_MESHES),
                 )
                 .and_then(|r| r.with_home(&PANDA_HOME))
+                .and_then(|r| r.with_limits_yaml(limits_file::PANDA_JOINT_LIMITS))
                 .map_err(|e| e.to_string())
             })
             .clone()
@@ -221,15 +230,32 @@ impl Robot {
     }
 
     /// Load the chain from `base` to `tip` out of a URDF file; mesh names
-    /// resolve against its folder ([`mesh_files`]); errors name the file.
+    /// resolve against its folder ([`mesh_files`]), and the acceleration and
+    /// jerk limits come from the [`limits_file`] there (without one the
+    /// robot has none, and says so in [`Robot::warnings`]); errors name the
+    /// file.
     pub fn from_urdf_file(path: &std::path::Path, base: &str, tip: &str) -> Result<Robot> {
         let text = std::fs::read_to_string(path).map_err(|e| Error::file(path, e.to_string()))?;
         let dir = path
             .parent()
             .map(std::path::Path::to_path_buf)
             .unwrap_or_default();
-        urdf::robot_from_str(&text, base, tip, &MeshFiles::Folder(dir))
-            .map_err(|e| Error::file(path, e.to_string()))
+        let mut robot = urdf::robot_from_str(&text, base, tip, &MeshFiles::Folder(dir.clone()))
+            .map_err(|e| Error::file(path, e.to_string()))?;
+        let limits = dir.join(limits_file::LIMITS_FILE_NAME);
+        if limits.is_file() {
+            let text = std::fs::read_to_string(&limits)
+                .map_err(|e| Error::file(&limits, e.to_string()))?;
+            robot = robot
+                .with_limits_yaml(&text)
+                .map_err(|e| Error::file(&limits, e.to_string()))?;
+        } else {
+            robot.warnings.push(format!(
+                "no {} beside the URDF: no acceleration or jerk limits unless a request gives them",
+                limits_file::LIMITS_FILE_NAME
+            ));
+        }
+        Ok(robot)
     }
 
     /// Remarks from loading that are not errors (e.g. a mesh that is not

@@ -233,6 +233,8 @@ fn joint_limit(joint: &urdf_rs::Joint) -> Result<JointLimit> {
         lower: l.lower,
         upper: l.upper,
         velocity: l.velocity,
+        acceleration: None,
+        jerk: None,
     })
 }
 

@@ -27,6 +27,7 @@ mod optim_continuous;
 mod optim_determinism;
 mod optim_dual_active_set;
 mod optim_exactness;
+mod optim_franka;
 mod optim_properties;
 mod optim_requests;
 mod python_client;

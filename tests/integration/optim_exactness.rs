@@ -68,6 +68,7 @@ fn request(prior: &PriorSpec, robot: &Robot, margin: f64) -> OptimizeRequest {
         "prior": prior,
         "obstacles": [],
         "joint_limit_margin_rad": margin,
+        "boundary": "free",
     });
     let mut req: OptimizeRequest = serde_json::from_value(json).unwrap();
     let p = req.validate(robot).unwrap();

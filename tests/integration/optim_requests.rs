@@ -308,6 +308,8 @@ fn a_local_minimum_from_the_prior_mean_is_escaped_by_a_seeded_restart() {
     // but the problem is feasible and a seeded restart solves it (397 of
     // typical problems 100..=500 are solved without restarts).
     let (robot, mut req) = request(400, 10);
+    // The scenario is on the paper's timing (free ends).
+    req.boundary = dpmp::optim::Boundary::Free;
     req.options.restarts = 0;
     let stuck = optimize(&req, &robot).unwrap();
     assert_eq!(stuck.status, Status::MaxIterations);

@@ -23,6 +23,10 @@ fn ros_package(root: &Path, urdf: &str) -> PathBuf {
     }
     let path = pkg.join("urdf/panda.urdf");
     std::fs::write(&path, urdf).unwrap();
+    let limits = pkg
+        .join("urdf")
+        .join(dpmp::robot::limits_file::LIMITS_FILE_NAME);
+    std::fs::write(limits, dpmp::robot::limits_file::PANDA_JOINT_LIMITS).unwrap();
     path
 }
 

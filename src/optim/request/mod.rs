@@ -58,6 +58,45 @@ pub struct OptimizeRequest {
     /// How the answer writes the trajectory (`dpmp` or `ros2`).
     #[serde(default, skip_serializing_if = "TrajectoryFormat::is_default")]
     pub trajectory_format: TrajectoryFormat,
+    /// Velocity and acceleration at both ends: `rest` (zero; the default,
+    /// what a Franka needs) or `free`.
+    #[serde(default)]
+    pub boundary: Boundary,
+    /// Per-joint acceleration limits (rad/s²); default: the robot's
+    /// (`joint_limits.yaml` beside its URDF).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub acceleration_limits: Option<Vec<f64>>,
+    /// Per-joint jerk limits (rad/s³); default: the robot's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub jerk_limits: Option<Vec<f64>>,
+    /// Factor in (0, 1] on every velocity limit (MoveIt's
+    /// `max_velocity_scaling_factor`).
+    #[serde(default = "one", skip_serializing_if = "is_one")]
+    pub velocity_scaling: f64,
+    /// Factor in (0, 1] on every acceleration limit (MoveIt's
+    /// `max_acceleration_scaling_factor`); jerk limits are not scaled.
+    #[serde(default = "one", skip_serializing_if = "is_one")]
+    pub acceleration_scaling: f64,
+}
+
+/// Velocity and acceleration at the start and the end of the motion.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Boundary {
+    /// Zero velocity and acceleration at both ends: the motion starts from
+    /// and comes to a standstill, as libfranka and ros2_control require of
+    /// a commanded motion.
+    #[default]
+    Rest,
+    /// Whatever velocity and acceleration the weights give.
+    Free,
+}
+
+fn one() -> f64 {
+    1.0
+}
+fn is_one(v: &f64) -> bool {
+    *v == 1.0
 }
 
 fn default_duration() -> f64 {
@@ -101,7 +140,8 @@ impl From<&crate::promp::WeightDistribution> for PriorSpec {
     }
 }
 
-/// Goal: TCP position at the end of the motion.
+/// Goal: TCP position at the end of the motion and, optionally, the
+/// direction the gripper approaches from.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct Goal {
@@ -110,6 +150,40 @@ pub struct Goal {
     /// Allowed distance (m).
     #[serde(default = "default_tolerance")]
     pub tolerance_m: f64,
+    /// Unit vector in the base frame: the gripper's z axis (the direction
+    /// the fingers point) at the end must lie within
+    /// `approach_tolerance_rad` of it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub approach_axis: Option<[f64; 3]>,
+    /// Allowed angle (rad) between the gripper's z axis and
+    /// `approach_axis`, in (0, π].
+    #[serde(
+        default = "default_approach_tolerance",
+        skip_serializing_if = "is_default_approach_tolerance"
+    )]
+    pub approach_tolerance_rad: f64,
+}
+
+impl Goal {
+    /// A position goal within `tolerance_m`, no approach direction.
+    pub fn at(position: [f64; 3], tolerance_m: f64) -> Goal {
+        Goal {
+            position,
+            tolerance_m,
+            approach_axis: None,
+            approach_tolerance_rad: DEFAULT_APPROACH_TOLERANCE_RAD,
+        }
+    }
+}
+
+/// Default `goal.approach_tolerance_rad`: 10°.
+pub const DEFAULT_APPROACH_TOLERANCE_RAD: f64 = std::f64::consts::PI / 18.0;
+
+fn default_approach_tolerance() -> f64 {
+    DEFAULT_APPROACH_TOLERANCE_RAD
+}
+fn is_default_approach_tolerance(v: &f64) -> bool {
+    *v == DEFAULT_APPROACH_TOLERANCE_RAD
 }
 
 /// Solver knobs; every field is optional in JSON.

@@ -4,10 +4,10 @@
 //! the whitening, the phase rows and the limit set built.
 
 use super::DEFAULT_ACTIVATION_MARGIN_M;
-use super::{OptimizeRequest, PriorSpec, SolverOptions};
+use super::{Boundary, Goal, OptimizeRequest, PriorSpec, SolverOptions};
 use super::{MAX_DURATION_S, MAX_EXTRA_SAMPLES, MAX_OBSTACLES, MAX_PHASE_SAMPLES, MAX_RESTARTS};
 use crate::optim::linear::LinearSet;
-use crate::optim::phases::PhaseRows;
+use crate::optim::phases::{PhaseRows, TimeWarp};
 use crate::optim::problem::Problem;
 use crate::optim::whiten::Whitening;
 use crate::promp::annotation::{prior_from_joints, REPAIR_FLOOR_RELATIVE};
@@ -15,7 +15,7 @@ use crate::promp::{repair_covariance, Basis, WeightDistribution};
 use crate::robot::Robot;
 use crate::scene::Scene;
 use crate::{error::ensure_finite, Error, Result};
-use nalgebra::{DMatrix, DVector};
+use nalgebra::{DMatrix, DVector, Vector3};
 
 impl OptimizeRequest {
     /// Check every field against `robot` and build the whitened problem.
@@ -36,27 +36,22 @@ impl OptimizeRequest {
         };
         let whitening = Whitening::new(&prior, lambda)?;
         let basis = Basis::new(&self.promp)?;
-        let grid = PhaseRows::new(
-            &basis,
-            &whitening,
-            robot.dof(),
-            self.duration_s,
-            basis.phases(),
-        );
-        let ends = PhaseRows::new(
-            &basis,
-            &whitening,
-            robot.dof(),
-            self.duration_s,
-            &[0.0, 1.0],
-        );
-        let dense = basis.resampled(self.promp.n_samples * self.options.verify_factor)?;
+        let warp = match self.boundary {
+            Boundary::Rest => TimeWarp::MinimumJerk,
+            Boundary::Free => TimeWarp::Identity,
+        };
+        let timing = (self.duration_s, warp);
+        let grid = PhaseRows::new(&basis, &whitening, robot.dof(), timing, basis.phases());
+        let ends = PhaseRows::new(&basis, &whitening, robot.dof(), timing, &[0.0, 1.0]);
+        let dense_phases: Vec<f64> = basis
+            .resampled(self.promp.n_samples * self.options.verify_factor)?
+            .phases()
+            .to_vec();
         Ok(Problem {
             robot: robot.clone(),
             scene,
-            dense_phases: dense.phases().to_vec(),
-            dense_psi: dense.matrix().clone(),
-            dense_dpsi: dense.derivative() / self.duration_s,
+            dense: derivative_matrices(&basis, &dense_phases, timing),
+            dense_phases,
             basis,
             prior,
             whitening,
@@ -68,6 +63,7 @@ impl OptimizeRequest {
             goal: self.goal.clone(),
             options: self.options.clone(),
             duration: self.duration_s,
+            warp,
             trajectory_format: self.trajectory_format,
             n_extra_samples: self.samples,
             warnings,
@@ -105,8 +101,17 @@ impl OptimizeRequest {
             robot.validate_configuration("start", start)?;
         }
         if let Some(goal) = &self.goal {
-            ensure_finite("goal.position", &goal.position)?;
-            check_range("goal.tolerance_m", goal.tolerance_m, 1e-6, 1.0)?;
+            check_goal(goal)?;
+        }
+        check_scaling("velocity_scaling", self.velocity_scaling)?;
+        check_scaling("acceleration_scaling", self.acceleration_scaling)?;
+        for (field, limits) in [
+            ("acceleration_limits", &self.acceleration_limits),
+            ("jerk_limits", &self.jerk_limits),
+        ] {
+            if let Some(limits) = limits {
+                check_positive_per_joint(field, limits, robot.dof())?;
+            }
         }
         if self.obstacles.len() > MAX_OBSTACLES {
             return Err(Error::invalid(
@@ -121,6 +126,24 @@ impl OptimizeRequest {
     }
 }
 
+/// The basis rows of the trajectory's time derivatives at the time
+/// fractions `phases` ([`TimeWarp::time_rows`]): row `p` of matrix `k` maps
+/// one joint's weights to `dᵏq/dtᵏ` at `phases[p]`.
+pub(crate) fn derivative_matrices(
+    basis: &Basis,
+    phases: &[f64],
+    (duration, warp): (f64, TimeWarp),
+) -> [DMatrix<f64>; 4] {
+    let nb = basis.n_basis();
+    let mut out: [DMatrix<f64>; 4] = std::array::from_fn(|_| DMatrix::zeros(phases.len(), nb));
+    for (p, &z) in phases.iter().enumerate() {
+        for (k, row) in warp.time_rows(basis, z, duration).into_iter().enumerate() {
+            out[k].row_mut(p).copy_from(&row.transpose());
+        }
+    }
+    out
+}
+
 /// `value` must be finite and in `[lo, hi]`.
 fn check_range(field: &str, value: f64, lo: f64, hi: f64) -> Result<()> {
     if value.is_finite() && value >= lo && value <= hi {
@@ -131,6 +154,66 @@ fn check_range(field: &str, value: f64, lo: f64, hi: f64) -> Result<()> {
             format!("must be a finite number in [{lo}, {hi}], got {value}"),
         ))
     }
+}
+
+/// A scaling factor must be in (0, 1].
+fn check_scaling(field: &str, value: f64) -> Result<()> {
+    if value.is_finite() && value > 0.0 && value <= 1.0 {
+        Ok(())
+    } else {
+        Err(Error::invalid(
+            field,
+            format!("must be a number in (0, 1], got {value}"),
+        ))
+    }
+}
+
+/// One positive finite number per joint.
+fn check_positive_per_joint(field: &str, values: &[f64], dof: usize) -> Result<()> {
+    if values.len() != dof {
+        return Err(Error::invalid(
+            field,
+            format!(
+                "expected {dof} numbers (one per joint), got {}",
+                values.len()
+            ),
+        ));
+    }
+    match values.iter().position(|v| !(v.is_finite() && *v > 0.0)) {
+        Some(j) => Err(Error::invalid(
+            format!("{field}[{j}]"),
+            format!("must be a positive finite number, got {}", values[j]),
+        )),
+        None => Ok(()),
+    }
+}
+
+/// Largest accepted deviation of `goal.approach_axis` from unit length
+/// (the axis is normalised after the check).
+pub const APPROACH_AXIS_NORM_TOLERANCE: f64 = 1e-3;
+
+/// The goal's position, tolerance and approach direction.
+fn check_goal(goal: &Goal) -> Result<()> {
+    ensure_finite("goal.position", &goal.position)?;
+    check_range("goal.tolerance_m", goal.tolerance_m, 1e-6, 1.0)?;
+    if let Some(axis) = &goal.approach_axis {
+        ensure_finite("goal.approach_axis", axis)?;
+        let norm = Vector3::from(*axis).norm();
+        if (norm - 1.0).abs() > APPROACH_AXIS_NORM_TOLERANCE {
+            return Err(Error::invalid(
+                "goal.approach_axis",
+                format!("must be a unit vector (length within {APPROACH_AXIS_NORM_TOLERANCE} of 1), got length {norm}"),
+            ));
+        }
+        let tol = goal.approach_tolerance_rad;
+        if !(tol.is_finite() && tol > 0.0 && tol <= std::f64::consts::PI) {
+            return Err(Error::invalid(
+                "goal.approach_tolerance_rad",
+                format!("must be a number in (0, π], got {tol}"),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// Check the solver knobs; returns the activation distance.
@@ -185,13 +268,42 @@ fn joint_bounds(robot: &Robot, margin: f64, req: &OptimizeRequest) -> Result<Lin
             ));
         }
     }
+    let acceleration = rate_limits(
+        req.acceleration_limits.as_deref(),
+        limits.iter().map(|l| l.acceleration),
+    )
+    .map(|a| a.iter().map(|v| v * req.acceleration_scaling).collect());
     Ok(LinearSet {
         lower: limits.iter().map(|l| l.lower + margin).collect(),
         upper: limits.iter().map(|l| l.upper - margin).collect(),
-        velocity: limits.iter().map(|l| l.velocity).collect(),
+        velocity: limits
+            .iter()
+            .map(|l| l.velocity * req.velocity_scaling)
+            .collect(),
+        acceleration,
+        jerk: rate_limits(req.jerk_limits.as_deref(), limits.iter().map(|l| l.jerk)),
         start: req.start.clone(),
         final_configuration: req.options.final_configuration.clone(),
+        rest: req.boundary == Boundary::Rest,
         bound_weights: req.options.bound_weights,
+    })
+}
+
+/// The request's limits, else the robot's (a joint without one is
+/// unbounded); `None` when neither gives any.
+fn rate_limits(
+    request: Option<&[f64]>,
+    robot: impl Iterator<Item = Option<f64>>,
+) -> Option<Vec<f64>> {
+    if let Some(r) = request {
+        return Some(r.to_vec());
+    }
+    let per_joint: Vec<Option<f64>> = robot.collect();
+    per_joint.iter().any(Option::is_some).then(|| {
+        per_joint
+            .iter()
+            .map(|v| v.unwrap_or(f64::INFINITY))
+            .collect()
     })
 }
 

@@ -8,8 +8,9 @@
 
 use serde_json::Value;
 
-const ANNOTATIONS: [&str; 10] = [
+const ANNOTATIONS: [&str; 11] = [
     "description",
+    "discriminator",
     "title",
     "default",
     "example",
