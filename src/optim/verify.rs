@@ -4,6 +4,7 @@
 //! between the samples ([`super::continuous`]). The report the user sees
 //! always comes from here.
 
+use super::linear::RATE_BUFFER;
 use super::phases::Derivative;
 use super::problem::Problem;
 use super::report::{
@@ -115,13 +116,21 @@ impl Problem {
 
     /// Largest `|value| / bound` of derivative `d` (`values`: one row per
     /// dense phase); flags the phases above 1.
+    ///
+    /// Acceleration and jerk phases are flagged once they use more than half
+    /// of the QP rows' [`RATE_BUFFER`]: the rows then join there, so that
+    /// the peaks between verification samples stay within the limit too.
     fn rate_ratio(&self, d: Derivative, values: &DMatrix<f64>, flagged: &mut [bool]) -> f64 {
+        let flag_above = match d {
+            Derivative::Acceleration | Derivative::Jerk => 1.0 - 0.5 * RATE_BUFFER,
+            _ => 1.0 + FEASIBILITY_TOLERANCE,
+        };
         let mut worst: f64 = 0.0;
         for (p, flag) in flagged.iter_mut().enumerate() {
             for j in 0..values.ncols() {
                 let bound = self.linear.rate_bound(d, j).unwrap_or(f64::INFINITY);
                 let ratio = values[(p, j)].abs() / bound;
-                if ratio > 1.0 + FEASIBILITY_TOLERANCE {
+                if ratio > flag_above {
                     *flag = true;
                 }
                 worst = worst.max(ratio);
