@@ -95,11 +95,23 @@ impl LinearSet {
             .collect()
     }
 
-    /// Signed excess `value - bound` of one row for weights `w` (> 0 = violated).
+    /// The bound a row holds: the rate limit, less [`RATE_BUFFER`] of it
+    /// for acceleration and jerk.
+    fn row_bound(&self, d: Derivative, j: usize) -> Option<f64> {
+        let bound = self.rate_bound(d, j)?;
+        Some(match d {
+            Derivative::Acceleration | Derivative::Jerk => bound * (1.0 - RATE_BUFFER),
+            _ => bound,
+        })
+    }
+
+    /// Signed excess `value - bound` of one row for weights `w` (> 0 =
+    /// violated); acceleration and jerk rows are measured against their
+    /// buffered bound.
     pub fn excess(&self, rows: &PhaseRows, w: &DVector<f64>, r: RowRef) -> f64 {
         let (d, j) = (r.kind.derivative, r.joint);
         let value = rows.value(d, r.phase, j, w);
-        match (self.rate_bound(d, j), r.kind.upper) {
+        match (self.row_bound(d, j), r.kind.upper) {
             (None, true) => value - self.upper[j],
             (None, false) => self.lower[j] - value,
             (Some(b), true) => value - b,
@@ -107,20 +119,13 @@ impl LinearSet {
         }
     }
 
-    /// The row as `a·z <= b` given the weights at `z = 0` (the prior mean);
-    /// acceleration and jerk rows aim [`RATE_BUFFER`] inside their bound.
+    /// The row as `a·z <= b` given the weights at `z = 0` (the prior mean).
     pub fn inequality(&self, rows: &PhaseRows, mean: &DVector<f64>, r: RowRef) -> Inequality {
         let excess0 = self.excess(rows, mean, r);
-        let buffer = match r.kind.derivative {
-            Derivative::Acceleration | Derivative::Jerk => self
-                .rate_bound(r.kind.derivative, r.joint)
-                .map_or(0.0, |b| RATE_BUFFER * b),
-            _ => 0.0,
-        };
         let a = rows.row(r.kind.derivative, r.phase, r.joint);
         Inequality {
             a: if r.kind.upper { a.clone() } else { -a },
-            b: -excess0 - buffer,
+            b: -excess0,
             penalty: None,
         }
     }
@@ -194,7 +199,7 @@ impl LinearSet {
     }
 
     /// Equalities `a·z = b` for the start and final configuration at
-    /// `ends` (phases 0 and 1). Rest needs no row: the minimum-jerk timing
+    /// `ends` (phases 0 and 1). Rest needs no row: the resting timing
     /// ([`TimeWarp`](super::phases::TimeWarp)) makes every trajectory rest
     /// at the ends; [`LinearSet::equality_error`] still checks it.
     pub fn equalities(&self, ends: &PhaseRows, mean: &DVector<f64>) -> Vec<(DVector<f64>, f64)> {
@@ -312,16 +317,20 @@ mod tests {
         assert_eq!(set.kinds().len(), 8);
         for r in set.all_rows(&rows) {
             let ineq = set.inequality(&rows, &dist.mean, r);
-            // a·z - b equals the excess (plus the rate buffer) at any z.
-            let d = r.kind.derivative;
-            let buffer = match d {
-                Derivative::Acceleration | Derivative::Jerk => {
-                    RATE_BUFFER * set.rate_bound(d, r.joint).unwrap()
-                }
-                _ => 0.0,
-            };
+            // a·z - b equals the excess at any z, and the excess is
+            // measured against the buffered bound.
             let lhs = ineq.a.dot(&zk) - ineq.b;
-            assert!((lhs - set.excess(&rows, &wk, r) - buffer).abs() < 1e-9);
+            assert!((lhs - set.excess(&rows, &wk, r)).abs() < 1e-9);
+            let d = r.kind.derivative;
+            if let (Some(b), true) = (set.rate_bound(d, r.joint), r.kind.upper) {
+                let value = rows.value(d, r.phase, r.joint, &wk);
+                let buffer = if d == Derivative::Velocity {
+                    0.0
+                } else {
+                    RATE_BUFFER
+                };
+                assert!((set.excess(&rows, &wk, r) - (value - b * (1.0 - buffer))).abs() < 1e-9);
+            }
             if !kept.contains(&r) {
                 // Worst corner of the box cannot violate it.
                 let corner = DVector::from_fn(n, |i, _| zk[i] + radius * ineq.a[i].signum());

@@ -7,11 +7,12 @@
 //! **Timing.** The ProMP gives the path as a function of the phase `s`;
 //! the [`TimeWarp`] says when the robot is where: `q(t) = Ψ(s(t/T)) w`. With
 //! `boundary: free` the phase runs at constant speed, `s = τ` (the paper's
-//! timing). With `boundary: rest` it follows the minimum-jerk profile
-//! `s = 10τ³ − 15τ⁴ + 6τ⁵`, whose first and second derivatives vanish at
-//! both ends: every trajectory starts and ends with zero velocity and
-//! acceleration, for any weights, without a constraint row and without
-//! moving the path (positions, clearance, goal) by a millimetre. By the
+//! timing). With `boundary: rest` it ramps up over the first quarter of the
+//! time (smoothstep speed), runs at constant speed `4/3`, and ramps down
+//! over the last quarter ([`TimeWarp::Ramped`]): `ds/dτ` and `d²s/dτ²`
+//! vanish at both ends, so every trajectory starts and ends with zero
+//! velocity and acceleration, for any weights, without a constraint row and
+//! without moving the path (positions, clearance, goal) by a millimetre. By the
 //! chain rule (`s_k = dᵏs/dτᵏ`):
 //! `q̇ = ψ⁽¹⁾ s₁ w / T`, `q̈ = (ψ⁽²⁾ s₁² + ψ⁽¹⁾ s₂) w / T²`,
 //! `q⃛ = (ψ⁽³⁾ s₁³ + 3 ψ⁽²⁾ s₁ s₂ + ψ⁽¹⁾ s₃) w / T³`.
@@ -67,8 +68,29 @@ pub enum TimeWarp {
     /// `s = τ`: the ends move at whatever speed the weights give.
     Identity,
     /// `s = 10τ³ − 15τ⁴ + 6τ⁵`: rest at both ends.
-    #[default]
     MinimumJerk,
+    /// Rest at both ends by ramps over the first and last [`RAMP`] of the
+    /// time: `ds/dτ = v·m(τ/RAMP)` with the smoothstep `m(x) = 3x² − 2x³`,
+    /// then constant `v = 1 / (1 − RAMP)` in between (a trapezoid with
+    /// smooth corners: `s` is C², its jerk is bounded).
+    #[default]
+    Ramped,
+}
+
+/// Fraction of the duration each ramp of [`TimeWarp::Ramped`] takes.
+pub const RAMP: f64 = 0.25;
+
+/// `[s, ds/dτ, d²s/dτ², d³s/dτ³]` of the start ramp of
+/// [`TimeWarp::Ramped`] at `tau` in `[0, RAMP]`.
+fn ramp(tau: f64) -> [f64; 4] {
+    let v = 1.0 / (1.0 - RAMP);
+    let x = tau / RAMP;
+    [
+        v * RAMP * (x * x * x - 0.5 * x * x * x * x),
+        v * x * x * (3.0 - 2.0 * x),
+        v * 6.0 * x * (1.0 - x) / RAMP,
+        v * (6.0 - 12.0 * x) / (RAMP * RAMP),
+    ]
 }
 
 impl TimeWarp {
@@ -84,6 +106,15 @@ impl TimeWarp {
                     60.0 * tau * (1.0 - tau) * (1.0 - 2.0 * tau),
                     60.0 * (1.0 - 6.0 * tau + 6.0 * t2),
                 ]
+            }
+            TimeWarp::Ramped if tau < RAMP => ramp(tau),
+            TimeWarp::Ramped if tau > 1.0 - RAMP => {
+                let [s, s1, s2, s3] = ramp(1.0 - tau);
+                [1.0 - s, s1, -s2, s3]
+            }
+            TimeWarp::Ramped => {
+                let v = 1.0 / (1.0 - RAMP);
+                [0.5 * v * RAMP + v * (tau - RAMP), v, 0.0, 0.0]
             }
         }
     }
@@ -260,8 +291,8 @@ mod tests {
         // Each derivative = central difference of the one below / duration,
         // with either timing.
         let eps = 1e-5;
-        for warp in [TimeWarp::Identity, TimeWarp::MinimumJerk] {
-            for tau in [0.03, 0.5, 0.93] {
+        for warp in [TimeWarp::Identity, TimeWarp::MinimumJerk, TimeWarp::Ramped] {
+            for tau in [0.03, 0.2, 0.5, 0.93] {
                 let taus = [tau - eps, tau, tau + eps];
                 let r = PhaseRows::new(&basis, &wh, 7, (4.0, warp), &taus);
                 for (lower, upper) in Derivative::ALL.into_iter().zip(&Derivative::ALL[1..]) {
@@ -275,17 +306,48 @@ mod tests {
                 }
             }
         }
-        // The minimum-jerk timing rests at both ends, whatever the weights,
-        // and keeps the path's end points.
-        let ends = PhaseRows::new(&basis, &wh, 7, (4.0, TimeWarp::MinimumJerk), &[0.0, 1.0]);
-        for p in 0..2 {
-            for d in [Derivative::Velocity, Derivative::Acceleration] {
-                assert!(ends.values(d, p, &w).iter().all(|v| v.abs() < 1e-12));
+        // The resting timings rest at both ends, whatever the weights, and
+        // keep the path's end points.
+        for warp in [TimeWarp::MinimumJerk, TimeWarp::Ramped] {
+            let ends = PhaseRows::new(&basis, &wh, 7, (4.0, warp), &[0.0, 1.0]);
+            for p in 0..2 {
+                for d in [Derivative::Velocity, Derivative::Acceleration] {
+                    assert!(ends.values(d, p, &w).iter().all(|v| v.abs() < 1e-12));
+                }
+                assert_eq!(ends.position(p, &w), rows.position(2 * p, &w));
             }
-            assert_eq!(ends.position(p, &w), rows.position(2 * p, &w));
         }
         let mean = dist.trajectory_mean(&basis);
         let q_end = rows.position(2, &w0);
         assert!((q_end[3] - mean[(149, 3)]).abs() < 1e-9);
+    }
+}
+
+#[cfg(test)]
+mod warp_tests {
+    use super::*;
+
+    #[test]
+    fn every_timing_runs_from_0_to_1_with_its_derivatives_consistent() {
+        for warp in [TimeWarp::Identity, TimeWarp::MinimumJerk, TimeWarp::Ramped] {
+            assert!(warp.at(0.0)[0].abs() < 1e-15 && (warp.at(1.0)[0] - 1.0).abs() < 1e-15);
+            let h = 1e-6;
+            for k in 1..200 {
+                let tau = k as f64 / 200.0;
+                let (a, b, c) = (warp.at(tau - h), warp.at(tau), warp.at(tau + h));
+                for order in 0..3 {
+                    let fd = (c[order] - a[order]) / (2.0 * h);
+                    let scale = 1.0 + b[order + 1].abs();
+                    // s''' jumps at the ramp ends of the ramped timing.
+                    let at_jump =
+                        order == 2 && [RAMP, 1.0 - RAMP].iter().any(|j| (tau - j).abs() < 2.0 * h);
+                    assert!(
+                        at_jump || (fd - b[order + 1]).abs() < 1e-4 * scale,
+                        "{warp:?} τ {tau} order {order}"
+                    );
+                }
+                assert!(b[1] >= 0.0, "{warp:?}: the phase never runs backwards");
+            }
+        }
     }
 }

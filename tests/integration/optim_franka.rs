@@ -20,10 +20,22 @@ fn panda() -> Robot {
     Robot::panda().unwrap()
 }
 
-/// The documented minimum-jerk phase of `boundary: rest`, typed in here:
-/// `s(τ) = 10τ³ − 15τ⁴ + 6τ⁵`.
-fn minimum_jerk(tau: f64) -> f64 {
-    tau.powi(3) * (10.0 - 15.0 * tau + 6.0 * tau * tau)
+/// The documented phase of `boundary: rest`, typed in here: ramps over the
+/// first and last quarter with `ds/dτ = v (3x² − 2x³)`, `x = τ / 0.25`,
+/// constant `v = 4/3` between; `s` is that speed integrated.
+fn rest_phase(tau: f64) -> f64 {
+    let (r, v) = (0.25, 4.0 / 3.0);
+    let ramp = |t: f64| {
+        let x = t / r;
+        v * r * (x.powi(3) - 0.5 * x.powi(4))
+    };
+    if tau < r {
+        ramp(tau)
+    } else if tau > 1.0 - r {
+        1.0 - ramp(1.0 - tau)
+    } else {
+        ramp(r) + v * (tau - r)
+    }
 }
 
 /// Joint `j`'s position at time `t` of `weights`' trajectory: the basis at
@@ -32,7 +44,7 @@ fn minimum_jerk(tau: f64) -> f64 {
 fn position(req: &OptimizeRequest, basis: &Basis, weights: &[f64], j: usize, t: f64) -> f64 {
     let tau = t / req.duration_s;
     let s = match req.boundary {
-        Boundary::Rest => minimum_jerk(tau),
+        Boundary::Rest => rest_phase(tau),
         Boundary::Free => tau,
     };
     let psi = basis.row_at(s);

@@ -37,7 +37,7 @@ impl OptimizeRequest {
         let whitening = Whitening::new(&prior, lambda)?;
         let basis = Basis::new(&self.promp)?;
         let warp = match self.boundary {
-            Boundary::Rest => TimeWarp::MinimumJerk,
+            Boundary::Rest => TimeWarp::Ramped,
             Boundary::Free => TimeWarp::Identity,
         };
         let timing = (self.duration_s, warp);
