@@ -12,7 +12,7 @@ use serde::Serialize;
 pub struct JointInfo {
     /// Joint name from the URDF.
     pub name: String,
-    /// Position and velocity limits.
+    /// Position, velocity, acceleration and jerk limits.
     #[serde(flatten)]
     pub limit: JointLimit,
 }
