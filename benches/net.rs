@@ -147,6 +147,7 @@ fn plan(c: &mut Criterion) {
                 target,
                 goal_standoff_m: None,
                 request: request.clone(),
+                approach: None,
             };
             black_box(
                 predict_and_optimize(model, &robot, input, &Default::default()).expect("plan"),

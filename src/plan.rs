@@ -73,6 +73,25 @@ pub struct PlanInput {
     pub goal_standoff_m: Option<f64>,
     /// The optimiser request; its prior is replaced by the prediction.
     pub request: OptimizeRequest,
+    /// An approach direction for the goal derived from the target.
+    pub approach: Option<GoalApproach>,
+}
+
+/// The approach direction of a goal derived from the 3-D target (the
+/// request's `goal` without a `position`): the gripper's z axis at the end
+/// within `approach_tolerance_rad` of `approach_axis`.
+#[derive(Clone, Debug, PartialEq, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GoalApproach {
+    /// Unit vector in the base frame.
+    pub approach_axis: [f64; 3],
+    /// Allowed angle (rad).
+    #[serde(default = "default_approach_tolerance")]
+    pub approach_tolerance_rad: f64,
+}
+
+fn default_approach_tolerance() -> f64 {
+    crate::optim::request::DEFAULT_APPROACH_TOLERANCE_RAD
 }
 
 /// The predicted prior as trajectories (`T x dof`, rows are time samples).
@@ -146,8 +165,19 @@ pub fn predict_and_optimize(
                     "a goal is derived from the depth / target_position; send one or the other",
                 ));
             }
-            request.goal = Some(Goal::at(report.goal, report.goal_tolerance_m));
+            let mut goal = Goal::at(report.goal, report.goal_tolerance_m);
+            if let Some(a) = &input.approach {
+                goal.approach_axis = Some(a.approach_axis);
+                goal.approach_tolerance_rad = a.approach_tolerance_rad;
+            }
+            request.goal = Some(goal);
             Some(report)
+        }
+        None if input.approach.is_some() => {
+            return Err(Error::invalid(
+                "goal.position",
+                "an approach direction needs a goal: send goal.position, a depth image or a target position",
+            ))
         }
         None => None,
     };

@@ -5,7 +5,7 @@
 use crate::net::Model;
 use crate::optim::OptimizeRequest;
 use crate::perception::depth::{DepthImage, DEFAULT_DEPTH_SCALE_M};
-use crate::plan::{predict_and_optimize, PlanInput, TargetInput};
+use crate::plan::{predict_and_optimize, GoalApproach, PlanInput, TargetInput};
 use crate::{Error, Result};
 use clap::Args;
 use std::path::PathBuf;
@@ -47,6 +47,13 @@ pub struct PlanArgs {
     /// Standoff of the pre-grasp goal short of the berry (m); default 0.1.
     #[arg(long)]
     pub goal_standoff: Option<f64>,
+    /// Unit vector x,y,z (base frame) the gripper's z axis must end within
+    /// --approach-tolerance of (with --depth or --target-position).
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
+    pub approach_axis: Option<Vec<f64>>,
+    /// Allowed angle to --approach-axis (rad).
+    #[arg(long, default_value_t = crate::optim::request::DEFAULT_APPROACH_TOLERANCE_RAD)]
+    pub approach_tolerance: f64,
     /// Scene file `{"obstacles": [...]}` (request schema).
     #[arg(long)]
     pub scene: Option<PathBuf>,
@@ -102,9 +109,25 @@ pub fn run(args: PlanArgs) -> Result<()> {
         target,
         goal_standoff_m: args.goal_standoff,
         request,
+        approach: approach(&args)?,
     };
     let response = predict_and_optimize(&model, &robot, input, &Default::default())?;
     crate::cli::print_json(&response)
+}
+
+/// `--approach-axis` and `--approach-tolerance`, if an axis is given.
+fn approach(args: &PlanArgs) -> Result<Option<GoalApproach>> {
+    let Some(axis) = &args.approach_axis else {
+        return Ok(None);
+    };
+    let approach_axis: [f64; 3] = axis
+        .clone()
+        .try_into()
+        .map_err(|_| Error::invalid("--approach-axis", "expected three numbers x,y,z"))?;
+    Ok(Some(GoalApproach {
+        approach_axis,
+        approach_tolerance_rad: args.approach_tolerance,
+    }))
 }
 
 /// The 3-D target of `--depth` or `--target-position`.

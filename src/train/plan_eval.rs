@@ -127,6 +127,7 @@ fn plan_one(
         target: TargetInput::Depth(depth, format!("depth of {}", entry.id)),
         goal_standoff_m: None,
         request,
+        approach: None,
     };
     let answer = predict_and_optimize(model, robot, input, &Default::default())?;
     let last = answer

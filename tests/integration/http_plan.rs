@@ -359,3 +359,59 @@ fn the_service_refuses_a_model_trained_for_another_robot() {
     let network = dpmp::net::Network::new(config, 1, &candle_core::Device::Cpu).unwrap();
     assert!(AppState::new(test_config(), hand, Some(Model::from_network(network))).is_ok());
 }
+
+#[test]
+fn a_derived_goal_takes_the_request_s_approach_direction() {
+    let server = start_with_default_model();
+    let c = client();
+    let url = server.url("/v1/plan");
+    let (jpeg, depth, record) = generated_target_with_depth();
+    let (_, body) = depth_request(&jpeg, &depth, &record);
+    let (s, free) = post_json(&c, &url, body.to_string());
+    assert_eq!(s, 200, "{free}");
+    let robot = Robot::panda().unwrap();
+    let final_axis = |answer: &Value| {
+        let last = answer["trajectory"]["points"]
+            .as_array()
+            .unwrap()
+            .last()
+            .unwrap()
+            .clone();
+        robot.tcp_pose(&numbers(&last["positions"])).rotation * nalgebra::Vector3::z()
+    };
+    // Ask for an axis 0.15 rad off the one the plan ends with, within 0.05.
+    let a0 = final_axis(&free);
+    let side = nalgebra::Unit::new_normalize(a0.cross(&nalgebra::Vector3::x()));
+    let axis = nalgebra::UnitQuaternion::from_axis_angle(&side, 0.15) * a0;
+    let mut asked = body.clone();
+    asked["goal"] =
+        json!({"approach_axis": [axis.x, axis.y, axis.z], "approach_tolerance_rad": 0.05});
+    let (s, answer) = post_json(&c, &url, asked.to_string());
+    assert_eq!(s, 200, "{answer}");
+    assert_valid(&openapi(), "post", "/v1/plan", s, &answer);
+    assert_eq!(answer["target"]["goal"], free["target"]["goal"]);
+    assert_eq!(answer["status"], "optimal", "{}", answer["reason"]);
+    let angle = final_axis(&answer).dot(&axis).clamp(-1.0, 1.0).acos();
+    assert!(angle <= 0.05 + 1e-6, "{angle} rad");
+    let reported = answer["report"]["goal_angle_error_rad"].as_f64().unwrap();
+    assert!((reported - angle).abs() < 1e-6);
+    // A zero axis, or an unknown key, is refused naming the field.
+    for (goal, field) in [
+        (
+            json!({"approach_axis": [0.0, 0.0, 0.0]}),
+            "goal.approach_axis",
+        ),
+        (json!({"approach_axis": [0.0, 0.0, 1.0], "tilt": 1}), "goal"),
+    ] {
+        let mut bad = body.clone();
+        bad["goal"] = goal;
+        let (s, err) = post_json(&c, &url, bad.to_string());
+        assert_eq!(s, 422, "{err}");
+        assert!(
+            super::common::http::field(&err)
+                .unwrap_or("")
+                .starts_with(field),
+            "{err}"
+        );
+    }
+}

@@ -23,7 +23,7 @@ use super::optimize::{check_request_limits, record_solve, solve_control};
 use crate::optim::OptimizeRequest;
 use crate::perception::depth::{DepthImage, DEFAULT_DEPTH_SCALE_M};
 use crate::plan::{
-    check_target_position, predict_and_optimize, PlanInput, PlanResponse, TargetInput,
+    check_target_position, predict_and_optimize, GoalApproach, PlanInput, PlanResponse, TargetInput,
 };
 use crate::service::error::ApiError;
 use crate::service::extract::{from_value, media_type, parse_json, read_body, MediaType};
@@ -200,6 +200,7 @@ fn finish_input(
     }
     let target_position = optional_position(&mut fields)?;
     let goal_standoff_m = optional_number(&mut fields, STANDOFF_FIELD)?;
+    let approach = goal_approach(&mut fields)?;
     fields.insert(
         "prior".to_string(),
         serde_json::json!({"mean": [], "cov": []}),
@@ -241,7 +242,25 @@ fn finish_input(
         target,
         goal_standoff_m,
         request,
+        approach,
     })
+}
+
+/// A `goal` without a `position` (only with a derived goal): its approach
+/// direction, taken out of the request fields.
+fn goal_approach(fields: &mut Map<String, Value>) -> Result<Option<GoalApproach>, ApiError> {
+    match fields.get("goal") {
+        Some(Value::Object(goal)) if !goal.contains_key("position") => {
+            #[derive(serde::Deserialize)]
+            struct Field {
+                goal: GoalApproach,
+            }
+            let goal = fields.remove("goal").unwrap_or_default();
+            let field: Field = from_value(serde_json::json!({ "goal": goal }))?;
+            Ok(Some(field.goal))
+        }
+        _ => Ok(None),
+    }
 }
 
 /// A 16-bit depth PNG of the image's size.
