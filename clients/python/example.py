@@ -31,12 +31,16 @@ def main():
             mask_applied=True,
             obstacles=record["scene"]["obstacles"],
             clearance_m=0.02,
+            boundary="rest",              # start and end at rest, as a Franka needs (the default)
+            trajectory_format="ros2",     # trajectory_msgs/msg/JointTrajectory, ready to publish
         )
     except DpmpError as e:
         sys.exit(f"refused: {e.code} ({e.field}): {e.message}")
     last = answer["trajectory"]["points"][-1]
+    report = answer["report"]
     print(f"status {answer['status']}, {len(answer['trajectory']['points'])} points, "
-          f"goal {answer.get('target', {}).get('goal')}, final q {[round(q, 3) for q in last['positions']]}")
+          f"goal {answer.get('target', {}).get('goal')}, final q {[round(q, 3) for q in last['positions']]}, "
+          f"acceleration / jerk ratio {report.get('max_acceleration_ratio')} / {report.get('max_jerk_ratio')}")
 
 
 if __name__ == "__main__":
