@@ -113,6 +113,31 @@ pub fn ensure_finite(field: &str, values: &[f64]) -> Result<()> {
     }
 }
 
+/// Fail with a field-naming error unless `value` is finite and in
+/// `[lo, hi]` (the one range check of every validator).
+pub fn ensure_in_range(field: &str, value: f64, lo: f64, hi: f64) -> Result<()> {
+    if value.is_finite() && value >= lo && value <= hi {
+        Ok(())
+    } else {
+        Err(Error::invalid(
+            field,
+            format!("must be a finite number in [{lo}, {hi}], got {value}"),
+        ))
+    }
+}
+
+/// Fail with a field-naming error unless `value` is finite and > 0.
+pub fn ensure_positive(field: &str, value: f64) -> Result<()> {
+    if value.is_finite() && value > 0.0 {
+        Ok(())
+    } else {
+        Err(Error::invalid(
+            field,
+            format!("must be a finite number > 0, got {value}"),
+        ))
+    }
+}
+
 /// Fail with a field-naming error unless `values` has exactly `len` entries.
 pub fn ensure_len(field: &str, values: &[f64], len: usize) -> Result<()> {
     if values.len() == len {

@@ -297,12 +297,7 @@ fn goal_from_target(robot: &Robot, target: Located, standoff: Option<f64>) -> Re
         ..
     } = target;
     let standoff = standoff.unwrap_or(DEFAULT_GOAL_STANDOFF_M);
-    if !(standoff.is_finite() && (0.0..=MAX_GOAL_STANDOFF_M).contains(&standoff)) {
-        return Err(Error::invalid(
-            "goal_standoff_m",
-            format!("must be a finite number in [0, {MAX_GOAL_STANDOFF_M}], got {standoff}"),
-        ));
-    }
+    crate::error::ensure_in_range("goal_standoff_m", standoff, 0.0, MAX_GOAL_STANDOFF_M)?;
     let home = robot.tcp_pose(&robot.home()).translation.vector;
     let berry = Vector3::from(position);
     let axis = (berry - home)

@@ -2,7 +2,7 @@
 //! demonstrations, split), each with a `Default` taken from REFERENCE.md and
 //! a `validate` that names the offending field.
 
-use crate::error::ensure_finite;
+use crate::error::{ensure_finite, ensure_in_range, ensure_positive};
 use crate::perception::camera::{CameraModel, Intrinsics};
 use crate::{Error, Result};
 use serde::{Deserialize, Serialize};
@@ -340,12 +340,7 @@ impl DepthSettings {
             ("scale_m", self.scale_m, 1e-5, 0.01),
         ];
         for (name, v, lo, hi) in checks {
-            if !(v.is_finite() && v >= lo && v <= hi) {
-                return Err(Error::invalid(
-                    format!("depth.{name}"),
-                    format!("must be a finite number in [{lo}, {hi}], got {v}"),
-                ));
-            }
+            ensure_in_range(&format!("depth.{name}"), v, lo, hi)?;
         }
         if self.min_range_m >= self.max_range_m {
             return Err(Error::invalid(
@@ -484,7 +479,7 @@ impl DemoSettings {
                 ),
             ));
         }
-        positive("demos.duration_s", self.duration_s)?;
+        ensure_positive("demos.duration_s", self.duration_s)?;
         ensure_finite(
             "demos",
             &[
@@ -563,17 +558,6 @@ impl DemoSettings {
             return Err(Error::invalid("demos.max_tries", "must be >= 1"));
         }
         Ok(())
-    }
-}
-
-fn positive(field: &str, v: f64) -> Result<()> {
-    if v.is_finite() && v > 0.0 {
-        Ok(())
-    } else {
-        Err(Error::invalid(
-            field,
-            format!("must be a finite number > 0, got {v}"),
-        ))
     }
 }
 

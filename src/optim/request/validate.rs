@@ -6,6 +6,7 @@
 use super::DEFAULT_ACTIVATION_MARGIN_M;
 use super::{Boundary, Goal, OptimizeRequest, PriorSpec, SolverOptions};
 use super::{MAX_DURATION_S, MAX_EXTRA_SAMPLES, MAX_OBSTACLES, MAX_PHASE_SAMPLES, MAX_RESTARTS};
+use crate::error::{ensure_finite, ensure_in_range as check_range, ensure_positive};
 use crate::optim::linear::LinearSet;
 use crate::optim::phases::{PhaseRows, TimeWarp};
 use crate::optim::problem::Problem;
@@ -14,7 +15,7 @@ use crate::promp::annotation::{prior_from_joints, REPAIR_FLOOR_RELATIVE};
 use crate::promp::{repair_covariance, Basis, WeightDistribution};
 use crate::robot::Robot;
 use crate::scene::Scene;
-use crate::{error::ensure_finite, Error, Result};
+use crate::{Error, Result};
 use nalgebra::{DMatrix, DVector, Vector3};
 
 impl OptimizeRequest {
@@ -144,18 +145,6 @@ pub(crate) fn derivative_matrices(
     out
 }
 
-/// `value` must be finite and in `[lo, hi]`.
-fn check_range(field: &str, value: f64, lo: f64, hi: f64) -> Result<()> {
-    if value.is_finite() && value >= lo && value <= hi {
-        Ok(())
-    } else {
-        Err(Error::invalid(
-            field,
-            format!("must be a finite number in [{lo}, {hi}], got {value}"),
-        ))
-    }
-}
-
 /// A scaling factor must be in (0, 1].
 fn check_scaling(field: &str, value: f64) -> Result<()> {
     if value.is_finite() && value > 0.0 && value <= 1.0 {
@@ -179,13 +168,10 @@ fn check_positive_per_joint(field: &str, values: &[f64], dof: usize) -> Result<(
             ),
         ));
     }
-    match values.iter().position(|v| !(v.is_finite() && *v > 0.0)) {
-        Some(j) => Err(Error::invalid(
-            format!("{field}[{j}]"),
-            format!("must be a positive finite number, got {}", values[j]),
-        )),
-        None => Ok(()),
-    }
+    values
+        .iter()
+        .enumerate()
+        .try_for_each(|(j, &v)| ensure_positive(&format!("{field}[{j}]"), v))
 }
 
 /// Largest accepted deviation of `goal.approach_axis` from unit length
