@@ -14,6 +14,7 @@ use super::chain::isometry_from_xyz_rpy;
 use super::hull::ConvexHull;
 use super::mesh::{MeshFormat, TriangleMesh};
 use super::mesh_files::MeshFiles;
+use crate::error::ensure_positive;
 use crate::{Error, Result};
 use nalgebra::{Isometry3, Point3};
 use serde::Serialize;
@@ -223,17 +224,6 @@ pub fn read_mesh(
         MeshFormat::from_file_name(filename).map_err(|m| format!("mesh '{filename}': {m}"))?;
     let (location, bytes) = files.read(filename)?;
     TriangleMesh::parse(&bytes, format, scale).map_err(|m| format!("mesh file {location}: {m}"))
-}
-
-fn ensure_positive(field: &str, value: f64) -> Result<()> {
-    if value.is_finite() && value > 0.0 {
-        Ok(())
-    } else {
-        Err(Error::invalid(
-            field,
-            format!("must be a finite number > 0, got {value}"),
-        ))
-    }
 }
 
 fn ensure_non_negative(field: &str, value: f64) -> Result<()> {
