@@ -132,14 +132,21 @@ impl LinearSet {
 
     /// Every row of `rows`.
     pub fn all_rows<'a>(&self, rows: &'a PhaseRows) -> impl Iterator<Item = RowRef> + 'a {
-        let kinds = self.kinds();
+        // A fixed array (Copy) so that the nested closures allocate nothing.
+        let mut kinds = [RowKind {
+            derivative: Derivative::Position,
+            upper: true,
+        }; 8];
+        let listed = self.kinds();
+        kinds[..listed.len()].copy_from_slice(&listed);
+        let n_kinds = listed.len();
         (0..rows.len()).flat_map(move |phase| {
-            let kinds = kinds.clone();
             (0..rows.n_joints()).flat_map(move |joint| {
-                kinds
-                    .clone()
-                    .into_iter()
-                    .map(move |kind| RowRef { phase, joint, kind })
+                (0..n_kinds).map(move |k| RowRef {
+                    phase,
+                    joint,
+                    kind: kinds[k],
+                })
             })
         })
     }

@@ -99,7 +99,8 @@ pub fn optimize_with(
     }
     let mut solution = problem.solve(ctl)?;
     let mut min_duration_s = None;
-    if solution.status != Status::Optimal {
+    // A stopped solve (deadline, cancel) answers at once, undiagnosed.
+    if solution.status != Status::Optimal && ctl.stop_reason().is_none() {
         if let Some(d) = problem.duration_diagnosis() {
             solution.status = Status::Infeasible;
             solution.reason = Some(d.reason);

@@ -210,13 +210,7 @@ impl<'a> Scp<'a> {
         let mut qp_ms = 0.0;
         let p = self.problem;
         let (hint, ctl, stats) = (&self.hint, self.ctl, &mut self.stats);
-        let mut outcome = timed(&mut qp_ms, || p.subproblem(&at, hint, ctl, stats));
-        if matches!(outcome, Err(QpFailure::Infeasible)) && at.trust.is_some() {
-            // Rows at phases added since the iterate was evaluated may lie
-            // outside the trust ball: only the QP without it is a proof.
-            let unbounded = Linearisation { trust: None, ..at };
-            outcome = timed(&mut qp_ms, || p.subproblem(&unbounded, hint, ctl, stats));
-        }
+        let outcome = timed(&mut qp_ms, || p.subproblem(&at, hint, ctl, stats));
         self.stats.qp_ms += qp_ms;
         match outcome {
             Ok((sol, model_here, active)) => {

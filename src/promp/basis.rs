@@ -100,20 +100,19 @@ impl Basis {
     /// `d² psi / dz²` at any phase (divide by the duration squared for
     /// accelerations).
     pub fn second_derivative_row_at(&self, z: f64) -> DVector<f64> {
-        psi_second_derivative(&self.config, z)
+        let [_, _, d2, _] = psi_derivatives(&self.config, z);
+        d2
     }
 
     /// `d³ psi / dz³` at any phase (divide by the duration cubed for jerks).
     pub fn third_derivative_row_at(&self, z: f64) -> DVector<f64> {
-        psi_third_derivative(&self.config, z)
+        let [_, _, _, d3] = psi_derivatives(&self.config, z);
+        d3
     }
 
     /// `psi` and its first three phase derivatives at `z` (index = order).
     pub fn rows_at(&self, z: f64) -> [DVector<f64>; 4] {
-        let (psi, d1) = psi_and_derivative(&self.config, z);
-        let d2 = psi_second_derivative(&self.config, z);
-        let d3 = psi_third_derivative(&self.config, z);
-        [psi, d1, d2, d3]
+        psi_derivatives(&self.config, z)
     }
 
     /// The same basis resampled on `n_samples` phases (dense verification).
@@ -148,41 +147,27 @@ fn psi_and_derivative(config: &PrompConfig, z: f64) -> (DVector<f64>, DVector<f6
     (psi, dpsi)
 }
 
-/// `psi''(z)`: with `g_i = -(z - c_i) / h` (so `b_i' = g_i b_i`, `g_i' = -1/h`)
-/// and `psi_i' = psi_i (g_i - ḡ)`, `ḡ = Σ psi_j g_j`, differentiating once
-/// more gives `psi_i'' = psi_i' (g_i - ḡ) - psi_i Σ_j psi_j' g_j`.
-fn psi_second_derivative(config: &PrompConfig, z: f64) -> DVector<f64> {
-    let (psi, dpsi) = psi_and_derivative(config, z);
-    let nb = config.n_basis;
-    let g: Vec<f64> = (0..nb)
-        .map(|i| -(z - i as f64 / (nb - 1) as f64) / config.width)
-        .collect();
-    let mean_g: f64 = psi.iter().zip(&g).map(|(p, g)| p * g).sum();
-    let dmean_g: f64 = dpsi.iter().zip(&g).map(|(d, g)| d * g).sum();
-    DVector::from_iterator(
-        nb,
-        (0..nb).map(|i| dpsi[i] * (g[i] - mean_g) - psi[i] * dmean_g),
-    )
-}
-
-/// `psi'''(z)`: differentiating `psi_i'' = psi_i' (g_i - ḡ) - psi_i S₁`
-/// with `S₁ = Σ_j psi_j' g_j` (so `ḡ' = S₁ - 1/h` and, as `Σ_j psi_j' = 0`,
-/// `S₁' = Σ_j psi_j'' g_j = S₂`) gives
+/// `psi` and its first three phase derivatives at `z`, in one pass.
+///
+/// With `g_i = -(z - c_i) / h` (so `b_i' = g_i b_i`, `g_i' = -1/h`),
+/// `ḡ = Σ psi_j g_j`, `S₁ = Σ psi_j' g_j` and `S₂ = Σ psi_j'' g_j`:
+/// `psi_i'' = psi_i' (g_i - ḡ) - psi_i S₁`, and differentiating once more
+/// (`ḡ' = S₁ - 1/h`; `S₁' = S₂` as `Σ_j psi_j' = 0`)
 /// `psi_i''' = psi_i'' (g_i - ḡ) - 2 psi_i' S₁ - psi_i S₂`.
-fn psi_third_derivative(config: &PrompConfig, z: f64) -> DVector<f64> {
+fn psi_derivatives(config: &PrompConfig, z: f64) -> [DVector<f64>; 4] {
     let (psi, dpsi) = psi_and_derivative(config, z);
-    let ddpsi = psi_second_derivative(config, z);
     let nb = config.n_basis;
     let g: Vec<f64> = (0..nb)
         .map(|i| -(z - i as f64 / (nb - 1) as f64) / config.width)
         .collect();
-    let mean_g: f64 = psi.iter().zip(&g).map(|(p, g)| p * g).sum();
-    let s1: f64 = dpsi.iter().zip(&g).map(|(d, g)| d * g).sum();
-    let s2: f64 = ddpsi.iter().zip(&g).map(|(d, g)| d * g).sum();
-    DVector::from_iterator(
-        nb,
-        (0..nb).map(|i| ddpsi[i] * (g[i] - mean_g) - 2.0 * dpsi[i] * s1 - psi[i] * s2),
-    )
+    let against_g = |v: &DVector<f64>| v.iter().zip(&g).map(|(a, b)| a * b).sum::<f64>();
+    let (mean_g, s1) = (against_g(&psi), against_g(&dpsi));
+    let ddpsi = DVector::from_fn(nb, |i, _| dpsi[i] * (g[i] - mean_g) - psi[i] * s1);
+    let s2 = against_g(&ddpsi);
+    let dddpsi = DVector::from_fn(nb, |i, _| {
+        ddpsi[i] * (g[i] - mean_g) - 2.0 * dpsi[i] * s1 - psi[i] * s2
+    });
+    [psi, dpsi, ddpsi, dddpsi]
 }
 
 /// `(PhiᵀPhi + rI)⁻¹ Phiᵀ`, computed from the SVD of `Phi` as
