@@ -88,10 +88,18 @@ impl LinearSet {
     /// The kinds of row this set has: position and velocity always,
     /// acceleration and jerk when limited.
     pub fn kinds(&self) -> Vec<RowKind> {
+        self.derivatives()
+            .into_iter()
+            .flat_map(|derivative| [true, false].map(|upper| RowKind { derivative, upper }))
+            .collect()
+    }
+
+    /// The derivatives this set bounds: position and velocity always,
+    /// acceleration and jerk when limited.
+    fn derivatives(&self) -> Vec<Derivative> {
         Derivative::ALL
             .into_iter()
             .filter(|&d| d == Derivative::Position || self.rate_bound(d, 0).is_some())
-            .flat_map(|derivative| [true, false].map(|upper| RowKind { derivative, upper }))
             .collect()
     }
 
@@ -109,14 +117,70 @@ impl LinearSet {
     /// violated); acceleration and jerk rows are measured against their
     /// buffered bound.
     pub fn excess(&self, rows: &PhaseRows, w: &DVector<f64>, r: RowRef) -> f64 {
+        let value = rows.value(r.kind.derivative, r.phase, r.joint, w);
+        self.excess_of(value, r)
+    }
+
+    /// [`LinearSet::excess`] of row `r` given the value of its derivative.
+    fn excess_of(&self, value: f64, r: RowRef) -> f64 {
         let (d, j) = (r.kind.derivative, r.joint);
-        let value = rows.value(d, r.phase, j, w);
         match (self.row_bound(d, j), r.kind.upper) {
             (None, true) => value - self.upper[j],
             (None, false) => self.lower[j] - value,
             (Some(b), true) => value - b,
             (Some(b), false) => -b - value,
         }
+    }
+
+    /// Calls `f` with every row of `rows` and its excess at `w`, in the
+    /// order of [`LinearSet::all_rows`]. Each derivative is evaluated once
+    /// per phase and joint and gives both its upper and its lower row; the
+    /// loops are plain (this pass runs several times per SCP iteration over
+    /// thousands of rows).
+    fn for_each_excess(&self, rows: &PhaseRows, w: &DVector<f64>, mut f: impl FnMut(RowRef, f64)) {
+        let derivatives = self.derivatives();
+        let n_joints = rows.n_joints();
+        // (upper, lower) bound of every (derivative, joint).
+        let bounds: Vec<(f64, f64)> = derivatives
+            .iter()
+            .flat_map(|&d| {
+                (0..n_joints).map(move |j| match self.row_bound(d, j) {
+                    None => (self.upper[j], self.lower[j]),
+                    Some(b) => (b, -b),
+                })
+            })
+            .collect();
+        for phase in 0..rows.len() {
+            for joint in 0..n_joints {
+                for (k, &derivative) in derivatives.iter().enumerate() {
+                    let value = rows.value(derivative, phase, joint, w);
+                    let (upper_bound, lower_bound) = bounds[k * n_joints + joint];
+                    let row = |upper| RowRef {
+                        phase,
+                        joint,
+                        kind: RowKind { derivative, upper },
+                    };
+                    f(row(true), value - upper_bound);
+                    f(row(false), lower_bound - value);
+                }
+            }
+        }
+    }
+
+    /// The rows of `rows` whose excess at `w` passes `keep`.
+    fn rows_where(
+        &self,
+        rows: &PhaseRows,
+        w: &DVector<f64>,
+        mut keep: impl FnMut(RowRef, f64) -> bool,
+    ) -> Vec<RowRef> {
+        let mut kept = Vec::new();
+        self.for_each_excess(rows, w, |r, excess| {
+            if keep(r, excess) {
+                kept.push(r);
+            }
+        });
+        kept
     }
 
     /// The row as `a·z <= b` given the weights at `z = 0` (the prior mean).
@@ -130,7 +194,9 @@ impl LinearSet {
         }
     }
 
-    /// Every row of `rows`.
+    /// Every row of `rows`: by phase, then joint, then kind, with each
+    /// derivative's upper row right before its lower row
+    /// ([`LinearSet::for_each_excess`] keeps that order).
     pub fn all_rows<'a>(&self, rows: &'a PhaseRows) -> impl Iterator<Item = RowRef> + 'a {
         // A fixed array (Copy) so that the nested closures allocate nothing.
         let mut kinds = [RowKind {
@@ -154,9 +220,7 @@ impl LinearSet {
     /// Rows that a step within `radius` of `w` (the weights of the current
     /// iterate) could violate; `None` radius: rows within [`SCREEN_MARGIN`].
     pub fn screen(&self, rows: &PhaseRows, w: &DVector<f64>, radius: Option<f64>) -> Vec<RowRef> {
-        self.all_rows(rows)
-            .filter(|&r| self.excess(rows, w, r) + reach(rows, r, radius) >= 0.0)
-            .collect()
+        self.rows_where(rows, w, |r, excess| excess + reach(rows, r, radius) >= 0.0)
     }
 
     /// Like [`LinearSet::screen`], but a row also needs its slack within a
@@ -169,21 +233,17 @@ impl LinearSet {
         w: &DVector<f64>,
         radius: Option<f64>,
     ) -> Vec<RowRef> {
-        self.all_rows(rows)
-            .filter(|&r| {
-                let band = self
-                    .rate_bound(r.kind.derivative, r.joint)
-                    .map_or(SCREEN_BAND_POSITION, |b| SCREEN_BAND_VELOCITY * b);
-                self.excess(rows, w, r) + reach(rows, r, radius).min(band) >= 0.0
-            })
-            .collect()
+        self.rows_where(rows, w, |r, excess| {
+            let band = self
+                .rate_bound(r.kind.derivative, r.joint)
+                .map_or(SCREEN_BAND_POSITION, |b| SCREEN_BAND_VELOCITY * b);
+            excess + reach(rows, r, radius).min(band) >= 0.0
+        })
     }
 
     /// Rows violated by more than `tolerance` at `w`.
     pub fn violated(&self, rows: &PhaseRows, w: &DVector<f64>, tolerance: f64) -> Vec<RowRef> {
-        self.all_rows(rows)
-            .filter(|&r| self.excess(rows, w, r) > tolerance)
-            .collect()
+        self.rows_where(rows, w, |_, excess| excess > tolerance)
     }
 
     /// The derivatives each end must hold at a value: position at the
@@ -345,5 +405,14 @@ mod tests {
             }
         }
         assert!(kept.len() < set.all_rows(&rows).count());
+        // The one-evaluation-per-derivative pass agrees row by row.
+        let rows_seen: Vec<RowRef> = set.all_rows(&rows).collect();
+        let mut pass = Vec::new();
+        set.for_each_excess(&rows, &wk, |r, e| pass.push((r, e)));
+        assert_eq!(pass.len(), rows_seen.len());
+        for ((r, e), seen) in pass.into_iter().zip(rows_seen) {
+            assert_eq!(r, seen);
+            assert!((e - set.excess(&rows, &wk, r)).abs() < 1e-12);
+        }
     }
 }
