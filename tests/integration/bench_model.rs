@@ -5,6 +5,7 @@
 //! `prior-mean` equals the network prior mean's error computed here
 //! independently.
 
+use crate::common::json::read_json;
 use dpmp::bench::{method_from_name, run_model_suite, ModelSource, RunSettings};
 use dpmp::net::{Arch, Model};
 use dpmp::robot::Robot;
@@ -100,8 +101,7 @@ fn model_mode_runs_the_plan_pipeline_and_reports_final_tcp_error() {
     }
     let md = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(md.contains("Final TCP error"), "{md}");
-    let json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let json = read_json(&out.join("report.json"));
     assert!(json["summary"][0]["final_tcp_error_m"]["p50"]
         .as_f64()
         .is_some());

@@ -3,6 +3,7 @@
 //! through `run_suite`, checking the report files and the headline claims
 //! on this small set.
 
+use crate::common::json::read_json;
 use dpmp::bench::make_problems::{generator, make_one};
 use dpmp::bench::methods::penalty_gd::PenaltyGd;
 use dpmp::bench::methods::rejection::Rejection;
@@ -125,9 +126,7 @@ fn smoke_run_of_five_problems_writes_a_consistent_report() {
         (overall.infeasible_identified, overall.infeasible_total),
         (2, 2)
     );
-    let json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.path().join("report.json")).unwrap())
-            .unwrap();
+    let json = read_json(&out.path().join("report.json"));
     assert_eq!(json["records"].as_array().unwrap().len(), 24);
     let md = std::fs::read_to_string(out.path().join("report.md")).unwrap();
     assert!(md.contains("| dpmp-qp |") && md.contains("zz-broken"));

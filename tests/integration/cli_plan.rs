@@ -9,14 +9,8 @@ use serde_json::Value;
 use std::path::{Path, PathBuf};
 
 use crate::common::cli::dpmp;
-
-fn default_model() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("models/default")
-}
-
-fn read_json(path: &Path) -> Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
-}
+use crate::common::default_model_dir;
+use crate::common::json::{numbers, read_json};
 
 /// Generate one plant, return (dataset dir, first record).
 fn one_plant(dir: &Path) -> (PathBuf, Value) {
@@ -47,7 +41,7 @@ fn one_plant(dir: &Path) -> (PathBuf, Value) {
 
 #[test]
 fn plan_with_the_shipped_model_gives_a_valid_trajectory() {
-    let model = default_model();
+    let model = default_model_dir();
     assert!(
         model.join("model.safetensors").is_file(),
         "models/default is committed with the repository"
@@ -159,19 +153,9 @@ fn plan_with_depth_ends_near_the_demonstrations() {
         .last()
         .unwrap()
         .clone();
-    let q: Vec<f64> = last["positions"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap())
-        .collect();
+    let q = numbers(&last["positions"]);
     let tcp = robot.tcp_pose(&q).translation.vector;
-    let demos: Vec<f64> = record["final_tcp"]["position"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap())
-        .collect();
+    let demos = numbers(&record["final_tcp"]["position"]);
     let error = (tcp - nalgebra::Vector3::from_row_slice(&demos)).norm();
     assert!(
         error < 0.015,
@@ -198,7 +182,7 @@ fn eval_reports_depth_aware_planning_on_a_dataset_with_depth() {
     let o = dpmp(&[
         "eval",
         "--model",
-        default_model().to_str().unwrap(),
+        default_model_dir().to_str().unwrap(),
         "--data",
         data.to_str().unwrap(),
         "--split",
@@ -246,7 +230,7 @@ fn eval_on_a_test_split_reports_the_condition_only_baseline() {
     let o = dpmp(&[
         "eval",
         "--model",
-        default_model().to_str().unwrap(),
+        default_model_dir().to_str().unwrap(),
         "--data",
         data.to_str().unwrap(),
         "--format",
@@ -315,7 +299,7 @@ fn without_depth_the_box_only_model_plans_and_the_default_says_so() {
     assert_eq!(answer["prior"]["mean"].as_array().unwrap().len(), 150);
 
     let mut default = args.clone();
-    default.extend(["--model".into(), default_model().display().to_string()]);
+    default.extend(["--model".into(), default_model_dir().display().to_string()]);
     let o = dpmp(&default.iter().map(String::as_str).collect::<Vec<_>>());
     assert_eq!(o.status.code(), Some(2));
     let err = String::from_utf8_lossy(&o.stderr);

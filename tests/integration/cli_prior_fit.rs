@@ -8,6 +8,7 @@
 //! errors naming the file and the column, and nothing is written.
 
 use crate::common::cli::{arg, dpmp, dpmp_ok, stderr};
+use crate::common::json::read_json;
 use dpmp::promp::{annotation, Basis, PrompConfig, WeightDistribution};
 use dpmp::robot::Robot;
 use nalgebra::{DMatrix, DVector};
@@ -90,10 +91,6 @@ fn sample_demos(dir: &Path) -> (Basis, WeightDistribution, Vec<DVector<f64>>) {
         }
     }
     (basis, dist, weights)
-}
-
-fn read_json(path: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
 
 #[test]

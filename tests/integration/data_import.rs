@@ -6,6 +6,7 @@
 //! bad manifests are reported target by target with nothing written.
 
 use crate::common::cli::{arg, dpmp, dpmp_ok, stderr};
+use crate::common::json::{numbers, read_json};
 use dpmp::robot::Robot;
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
@@ -26,10 +27,6 @@ fn import(manifest: &Path, out: &Path) -> Value {
         arg(out),
     ]);
     serde_json::from_slice(&o.stdout).unwrap()
-}
-
-fn read_json(path: &Path) -> Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
 
 /// The last row of a demonstration CSV, joints only.
@@ -91,12 +88,7 @@ fn the_worked_example_imports_trains_and_plans() {
             })
             .collect();
         let mean = finals.iter().sum::<nalgebra::Vector3<f64>>() / finals.len() as f64;
-        let recorded: Vec<f64> = record["final_tcp"]["position"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|v| v.as_f64().unwrap())
-            .collect();
+        let recorded = numbers(&record["final_tcp"]["position"]);
         let error = (mean - nalgebra::Vector3::from_row_slice(&recorded)).norm();
         assert!(error < 1e-9, "{id}: {error}");
         assert!(record["target_depth_m"].as_f64().unwrap() > 0.2);

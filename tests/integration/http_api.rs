@@ -2,6 +2,8 @@
 //! error class (400, 401, 404, 405, 413, 415, 422, 503).
 
 use crate::common::http::*;
+use crate::common::json::numbers;
+use crate::common::requests::typical_json;
 use dpmp::service::auth::Token;
 use serde_json::{json, Value};
 
@@ -94,10 +96,7 @@ fn token_guards_everything_but_probes() {
 
 /// The typical request (real-like prior, 10 obstacles, 150 samples, 2 cm).
 fn typical_request(seed: u64) -> Value {
-    let robot = dpmp::robot::Robot::panda().unwrap();
-    let settings = dpmp::optim::example::ExampleSettings::default();
-    let request = dpmp::optim::example::typical_request(&robot, seed, &settings).unwrap();
-    serde_json::to_value(request).unwrap()
+    typical_json(seed, &Default::default())
 }
 
 #[test]
@@ -168,13 +167,6 @@ fn the_ros2_format_is_the_message_with_accelerations_and_the_same_motion() {
     let seconds = |p: &Value| {
         p["time_from_start"]["sec"].as_f64().unwrap()
             + p["time_from_start"]["nanosec"].as_f64().unwrap() * 1e-9
-    };
-    let numbers = |v: &Value| -> Vec<f64> {
-        v.as_array()
-            .unwrap()
-            .iter()
-            .map(|x| x.as_f64().unwrap())
-            .collect()
     };
     for (p, q) in points.iter().zip(plain) {
         assert!((seconds(p) - q["time_from_start"].as_f64().unwrap()).abs() <= 5e-10);

@@ -3,6 +3,7 @@
 //! real responses validate against the spec's schemas.
 
 use crate::common::http::*;
+use crate::common::requests::typical_json;
 use crate::common::schema::validate;
 use dpmp::service::routes;
 use serde_json::Value;
@@ -51,11 +52,7 @@ fn real_responses_validate_against_the_spec() {
         let (s, body) = status_and_json(c.get(server.url(path)).send().unwrap());
         assert_valid(&spec, "get", path, s, &body);
     }
-    let robot = dpmp::robot::Robot::panda().unwrap();
-    let settings = dpmp::optim::example::ExampleSettings::default();
-    let request =
-        serde_json::to_value(dpmp::optim::example::typical_request(&robot, 1, &settings).unwrap())
-            .unwrap();
+    let request = typical_json(1, &Default::default());
     let url = server.url("/v1/optimize");
     let (s, body) = post_json(&c, &url, request.to_string());
     assert_eq!(s, 200, "{body}");

@@ -7,6 +7,7 @@
 //! same plan, and the same request gives the same bytes (bar `solve_ms`).
 
 use crate::common::http::*;
+use crate::common::json::numbers;
 use base64::Engine as _;
 use dpmp::net::Model;
 use dpmp::robot::Robot;
@@ -18,14 +19,6 @@ use serde_json::{json, Value};
 use std::path::Path;
 
 const CLEARANCE_M: f64 = 0.02;
-
-/// A server with the shipped robot and model.
-fn start_with_default_model() -> RunningServer {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("models/default");
-    let model = Model::load(&dir).expect("models/default is committed with the repository");
-    let state = AppState::new(test_config(), Robot::panda().unwrap(), Some(model)).unwrap();
-    RunningServer::start(state).unwrap()
-}
 
 /// One generated target: JPEG bytes, its box and its scene's obstacles.
 fn generated_target() -> (Vec<u8>, [f64; 4], Value) {
@@ -47,16 +40,6 @@ fn generated_target_with_depth() -> (Vec<u8>, Vec<u8>, TargetRecord) {
         .unwrap();
     let depth = out.depths[0].as_ref().unwrap().encode_png().unwrap();
     (jpeg, depth, out.records[0].clone())
-}
-
-/// The answer without its wall-clock fields.
-fn without_times(mut v: Value) -> Value {
-    for key in ["report", "prior_mean_report"] {
-        if let Some(r) = v.get_mut(key).and_then(Value::as_object_mut) {
-            r.remove("solve_ms");
-        }
-    }
-    v
 }
 
 #[test]
@@ -119,7 +102,7 @@ fn plan_with_the_shipped_model_over_http() {
     assert_eq!(s, 200, "{multipart}");
     assert_eq!(multipart["trajectory"], answer["trajectory"]);
     let (_, again) = post_json(&c, &url, body.to_string());
-    assert_eq!(without_times(again), without_times(answer));
+    assert_eq!(without_timing(again), without_timing(answer));
 }
 
 #[test]
@@ -145,7 +128,7 @@ fn without_depth_or_target_no_goal_is_derived() {
     assert_valid(&openapi(), "post", "/v1/plan", s, &answer);
     assert!(answer.get("target").is_none());
     let (_, again) = post_json(&c, &url, body.to_string());
-    assert_eq!(without_times(again), without_times(answer));
+    assert_eq!(without_timing(again), without_timing(answer));
 }
 
 fn b64(bytes: &[u8]) -> String {
@@ -173,14 +156,6 @@ fn distance(a: &[f64], b: &[f64]) -> f64 {
         .map(|(x, y)| (x - y).powi(2))
         .sum::<f64>()
         .sqrt()
-}
-
-fn numbers(v: &Value) -> Vec<f64> {
-    v.as_array()
-        .unwrap()
-        .iter()
-        .map(|x| x.as_f64().unwrap())
-        .collect()
 }
 
 #[test]

@@ -4,6 +4,7 @@
 //! of mutated bodies never gets a 5xx or a non-JSON answer.
 
 use crate::common::http::*;
+use crate::common::requests::typical_json;
 use rand::{Rng, SeedableRng};
 use serde_json::{json, Value};
 use std::time::{Duration, Instant};
@@ -11,30 +12,12 @@ use std::time::{Duration, Instant};
 /// A smaller version of the typical request (50 samples, 3 obstacles) so
 /// that the many solves of this file stay fast in debug builds.
 fn typical_request(seed: u64) -> Value {
-    let robot = dpmp::robot::Robot::panda().unwrap();
     let settings = dpmp::optim::example::ExampleSettings {
         n_obstacles: 3,
         ..Default::default()
     };
-    let request = dpmp::optim::example::typical_request(&robot, seed, &settings).unwrap();
-    let mut v = serde_json::to_value(request).unwrap();
+    let mut v = typical_json(seed, &settings);
     v["promp"]["n_samples"] = json!(50);
-    v
-}
-
-/// The body with every `solve_ms` (the one timing field) removed.
-fn without_timing(mut v: Value) -> Value {
-    fn strip(v: &mut Value) {
-        match v {
-            Value::Object(map) => {
-                map.remove("solve_ms");
-                map.values_mut().for_each(strip);
-            }
-            Value::Array(items) => items.iter_mut().for_each(strip),
-            _ => {}
-        }
-    }
-    strip(&mut v);
     v
 }
 

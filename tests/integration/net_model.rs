@@ -3,6 +3,7 @@
 //! round trip, errors naming the tensor), preprocessing shared by training
 //! and inference, input validation of the inference API.
 
+use crate::common::json::{numbers, read_json};
 use candle_core::{Device, Tensor};
 use dpmp::net::checkpoint::{self, read_tensors, write_tensors};
 use dpmp::net::heads::HeadOutput;
@@ -365,17 +366,8 @@ fn preprocessing_is_identical_in_training_and_inference_paths() {
     let model = Model::from_network(Network::new(config, 0, &Device::Cpu).unwrap());
     for sample in &data.samples {
         let image = image::open(dir.path().join(format!("images/{}.png", sample.id))).unwrap();
-        let record: serde_json::Value = serde_json::from_str(
-            &std::fs::read_to_string(dir.path().join(format!("targets/{}.json", sample.id)))
-                .unwrap(),
-        )
-        .unwrap();
-        let b: Vec<f64> = record["box"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|v| v.as_f64().unwrap())
-            .collect();
+        let record = read_json(&dir.path().join(format!("targets/{}.json", sample.id)));
+        let b = numbers(&record["box"]);
         let bx = [b[0], b[1], b[2], b[3]];
         let served = model.preprocess(&image, bx, true).unwrap();
         assert_eq!(served, sample.prepared);

@@ -3,6 +3,7 @@
 //! seed, an interrupted run resumes to the same weights, every architecture
 //! trains through its phases and evaluates to finite tables.
 
+use crate::common::json::read_json;
 use dpmp::net::checkpoint::read_tensors;
 use dpmp::net::{Arch, Model};
 use dpmp::train::log::EpochRecord;
@@ -217,9 +218,7 @@ fn every_architecture_trains_and_evaluates() {
         for f in ["eval.json", "eval.md", "embedding.png"] {
             assert!(eval_dir.join(f).exists(), "{f}");
         }
-        let json: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(eval_dir.join("eval.json")).unwrap())
-                .unwrap();
+        let json = read_json(&eval_dir.join("eval.json"));
         assert!(json["mean_final_position_error_m"].is_number());
     }
 }

@@ -1,7 +1,8 @@
 //! Closed forms and optimality: the equality-only optimum is Gaussian
 //! conditioning, and convex instances agree with a tightly solved re-run.
 
-use dpmp::optim::example::{typical_request, ExampleSettings};
+use crate::common::requests::typical;
+use dpmp::optim::example::ExampleSettings;
 use dpmp::optim::whiten::Whitening;
 use dpmp::optim::{OptimizeRequest, SolveControl, Status};
 use dpmp::promp::{ViaPoint, WeightDistribution};
@@ -9,15 +10,13 @@ use dpmp::robot::Robot;
 use nalgebra::DMatrix;
 
 fn convex_request(seed: u64) -> (Robot, OptimizeRequest) {
-    let robot = Robot::panda().unwrap();
     let settings = ExampleSettings {
         n_obstacles: 0,
         with_goal: false,
         with_start: false,
         ..Default::default()
     };
-    let req = typical_request(&robot, seed, &settings).unwrap();
-    (robot, req)
+    typical(seed, &settings)
 }
 
 #[test]

@@ -4,12 +4,13 @@
 //! trajectory infeasible (and the optimiser's answer, when `optimal`, clear
 //! at 100× the verification sampling).
 
+use crate::common::scene::sphere;
 use dpmp::optim::continuous::displacement_bound;
 use dpmp::optim::example::{typical_request, ExampleSettings};
 use dpmp::optim::{optimize, OptimizeRequest, PriorSpec, Status};
 use dpmp::promp::{Basis, PrompConfig};
 use dpmp::robot::{Robot, ShapeGeometry};
-use dpmp::scene::{Obstacle, ObstacleShape, Scene};
+use dpmp::scene::Scene;
 use nalgebra::{DMatrix, DVector, Point3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -141,14 +142,7 @@ fn an_obstacle_between_two_samples_is_caught() {
         let (qa, _) = state(&basis, &wm, phases[k], req.duration_s);
         let (qb, _) = state(&basis, &wm, phases[k + 1], req.duration_s);
         for p in robot_points(&robot, &qm) {
-            let ball = Scene::new(vec![Obstacle {
-                id: "slipped".into(),
-                shape: ObstacleShape::Sphere {
-                    center: p.into(),
-                    radius: 0.003,
-                },
-            }])
-            .unwrap();
+            let ball = Scene::new(vec![sphere("slipped", p.into(), 0.003)]).unwrap();
             let clear = |q: &[f64]| ball.min_clearance(&robot, &robot.fk(q)).unwrap().distance;
             if clear(&qa) > 0.005 && clear(&qb) > 0.005 && clear(&qm) < 0.0 {
                 found = Some((p, mid));
@@ -157,13 +151,7 @@ fn an_obstacle_between_two_samples_is_caught() {
         }
     }
     let (centre, mid) = found.expect("a fast swing leaves points between its samples");
-    req.obstacles = vec![Obstacle {
-        id: "slipped".into(),
-        shape: ObstacleShape::Sphere {
-            center: centre.into(),
-            radius: 0.003,
-        },
-    }];
+    req.obstacles = vec![sphere("slipped", centre.into(), 0.003)];
     let problem = req.validate(&robot).unwrap();
     let report = problem.evaluate(&w);
     // Clear at every verification sample, penetrating in between: the

@@ -3,6 +3,7 @@
 //! each checked on the returned weights by an independent dense evaluation
 //! at 10× the optimisation sampling against Franka's published numbers.
 
+use crate::common::robot::panda;
 use dpmp::optim::example::{typical_request, ExampleSettings};
 use dpmp::optim::{optimize, Boundary, OptimizeRequest, OptimizeResponse, Status};
 use dpmp::promp::{example::example_distribution, Basis, PrompConfig};
@@ -15,10 +16,6 @@ use proptest::prelude::*;
 /// than read from the shipped file, so the check is independent of it.
 const FRANKA_ACCELERATION: [f64; 7] = [15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0];
 const FRANKA_JERK: [f64; 7] = [7500.0, 3750.0, 5000.0, 6250.0, 7500.0, 10000.0, 10000.0];
-
-fn panda() -> Robot {
-    Robot::panda().unwrap()
-}
 
 /// The documented phase of `boundary: rest`, typed in here: ramps over the
 /// first and last quarter with `ds/dτ = v (3x² − 2x³)`, `x = τ / 0.25`,

@@ -2,25 +2,25 @@
 //! diagnoses, the annotation prior with repair, samples, determinism and
 //! cancellation.
 
-use dpmp::optim::example::{typical_request, ExampleSettings};
+use crate::common::requests::typical;
+use crate::common::scene::sphere;
+use dpmp::optim::example::ExampleSettings;
 use dpmp::optim::{
     optimize, optimize_with, OptimizeRequest, OptimizeResponse, PriorSpec, SolveControl, Status,
 };
 use dpmp::promp::annotation::joints_from_distribution;
 use dpmp::promp::codec::{decode_covariance, encode_covariance, DiagEncoding};
 use dpmp::robot::Robot;
-use dpmp::scene::{Obstacle, ObstacleShape};
+use dpmp::scene::ObstacleShape;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
 fn request(seed: u64, n_obstacles: usize) -> (Robot, OptimizeRequest) {
-    let robot = Robot::panda().unwrap();
     let settings = ExampleSettings {
         n_obstacles,
         ..Default::default()
     };
-    let req = typical_request(&robot, seed, &settings).unwrap();
-    (robot, req)
+    typical(seed, &settings)
 }
 
 fn field_of(req: &OptimizeRequest, robot: &Robot) -> String {
@@ -136,13 +136,7 @@ fn infeasible_cases_are_diagnosed_with_the_constraint() {
     // Start in collision: a sphere on the start TCP.
     let mut r = base.clone();
     let tcp = robot.tcp_pose(r.start.as_ref().unwrap()).translation.vector;
-    r.obstacles.push(Obstacle {
-        id: "blocker".into(),
-        shape: ObstacleShape::Sphere {
-            center: tcp.into(),
-            radius: 0.03,
-        },
-    });
+    r.obstacles.push(sphere("blocker", tcp.into(), 0.03));
     let resp = optimize(&r, &robot).unwrap();
     assert_eq!(resp.status, Status::Infeasible);
     let reason = resp.reason.unwrap();
@@ -160,13 +154,7 @@ fn infeasible_cases_are_diagnosed_with_the_constraint() {
     // distance to the nearest robot shape - clearance): diagnosed up front.
     let mut r = base.clone();
     let goal = r.goal.as_ref().unwrap().position;
-    r.obstacles.push(Obstacle {
-        id: "over-goal".into(),
-        shape: ObstacleShape::Sphere {
-            center: goal,
-            radius: 0.1,
-        },
-    });
+    r.obstacles.push(sphere("over-goal", goal, 0.1));
     let resp = optimize(&r, &robot).unwrap();
     assert_eq!(resp.status, Status::Infeasible);
     let reason = resp.reason.unwrap();
@@ -364,14 +352,7 @@ fn assert_verified_optimal(req: &OptimizeRequest, robot: &Robot, found: &Optimiz
 fn tcp_to_nearest_shape(robot: &Robot) -> f64 {
     let home = robot.home();
     let tcp = robot.tcp_pose(&home).translation.vector;
-    let probe = dpmp::scene::Scene::new(vec![Obstacle {
-        id: "probe".into(),
-        shape: ObstacleShape::Sphere {
-            center: tcp.into(),
-            radius: 1e-9,
-        },
-    }])
-    .unwrap();
+    let probe = dpmp::scene::Scene::new(vec![sphere("probe", tcp.into(), 1e-9)]).unwrap();
     probe
         .min_clearance(robot, &robot.fk(&home))
         .unwrap()
@@ -388,13 +369,7 @@ fn the_buried_goal_certificate_is_sharp_and_holds_for_the_real_gripper() {
     let threshold = goal.tolerance_m + reach - base.clearance_m;
     let with_sphere = |radius: f64| {
         let mut r = base.clone();
-        r.obstacles = vec![Obstacle {
-            id: "over-goal".into(),
-            shape: ObstacleShape::Sphere {
-                center: goal.position,
-                radius,
-            },
-        }];
+        r.obstacles = vec![sphere("over-goal", goal.position, radius)];
         r
     };
     let above = with_sphere(threshold.max(0.0) + 5e-4);

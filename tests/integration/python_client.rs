@@ -4,10 +4,8 @@
 //! refused request raising `DpmpError` with the server's code and field.
 //! Skipped, with a message, only when no `python3` is on the machine.
 
-use crate::common::http::test_config;
-use dpmp::net::Model;
+use crate::common::http::start_with_default_model;
 use dpmp::robot::Robot;
-use dpmp::service::{AppState, RunningServer};
 use dpmp::synth::generate::Generator;
 use dpmp::synth::settings::SynthSettings;
 use serde_json::Value;
@@ -70,10 +68,7 @@ fn the_python_client_optimizes_plans_and_raises_the_servers_errors() {
     std::fs::write(&depth, depth_png).unwrap();
     let record = &plant.records[0];
 
-    let model_dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("models/default");
-    let model = Model::load(&model_dir).unwrap();
-    let state = AppState::new(test_config(), robot.clone(), Some(model)).unwrap();
-    let server = RunningServer::start(state).unwrap();
+    let server = start_with_default_model();
     let clients = Path::new(env!("CARGO_MANIFEST_DIR")).join("clients/python");
     let mut child = Command::new(python)
         .arg("-")

@@ -5,7 +5,9 @@
 //! `TriMesh` for capsules and boxes), while staying within the claimed
 //! tightness.
 
-use dpmp::robot::hull::{tightness, ConvexHull, ROUNDING_ALLOWANCE_M};
+use crate::common::robot::mesh_hulls;
+use crate::common::scene::sphere;
+use dpmp::robot::hull::{tightness, ROUNDING_ALLOWANCE_M};
 use dpmp::robot::hull_query::segment_triangle_distance;
 use dpmp::robot::mesh::TriangleMesh;
 use dpmp::robot::{Robot, ShapeGeometry};
@@ -23,22 +25,10 @@ const CLAIMED_MAX_GAP_M: f64 = 0.0015;
 /// within this much of the exact mesh distance (m).
 const CLAIMED_BOX_GAP_M: f64 = 0.005;
 
-/// Every mesh link of the shipped Panda: (link index, hull in link frame).
-fn mesh_links(robot: &Robot) -> Vec<(usize, ConvexHull)> {
-    robot
-        .collision_shapes()
-        .iter()
-        .filter_map(|s| match &s.geometry {
-            ShapeGeometry::Convex(h) => Some((s.link, h.clone())),
-            _ => None,
-        })
-        .collect()
-}
-
 #[test]
 fn every_mesh_triangle_is_inside_its_hull_exactly_and_by_dense_sampling() {
     let robot = Robot::panda().unwrap();
-    let links = mesh_links(&robot);
+    let links = mesh_hulls(&robot);
     assert_eq!(links.len(), 9, "links 0..7 and the hand");
     for (link, hull) in &links {
         let name = &robot.link_names()[*link];
@@ -72,7 +62,7 @@ fn every_mesh_triangle_is_inside_its_hull_exactly_and_by_dense_sampling() {
 #[test]
 fn hulls_give_away_at_most_the_claimed_clearance() {
     let robot = Robot::panda().unwrap();
-    for (link, hull) in mesh_links(&robot) {
+    for (link, hull) in mesh_hulls(&robot) {
         let name = &robot.link_names()[link];
         let t = tightness(&hull, hull.source().unwrap(), 0.004);
         eprintln!(
@@ -239,18 +229,10 @@ fn pierces(a: &Vector3<f64>, b: &Vector3<f64>, t: &[Vector3<f64>; 3]) -> bool {
     })
 }
 
-fn shape_centre(shape: &ObstacleShape) -> [f64; 3] {
-    match shape {
-        ObstacleShape::Sphere { center, .. } | ObstacleShape::Box { center, .. } => *center,
-        ObstacleShape::Capsule { a, b, .. } => [0, 1, 2].map(|i| 0.5 * (a[i] + b[i])),
-        _ => unreachable!(),
-    }
-}
-
 #[test]
 fn reported_clearance_never_exceeds_the_exact_mesh_distance() {
     let robot = Robot::panda().unwrap();
-    let links = mesh_links(&robot);
+    let links = mesh_hulls(&robot);
     let mut rng = ChaCha8Rng::seed_from_u64(18);
     let (mut worst_over, mut worst_under, mut worst_box) = (f64::NEG_INFINITY, 0.0f64, 0.0f64);
     for case in 0..600 {
@@ -292,7 +274,7 @@ fn reported_clearance_never_exceeds_the_exact_mesh_distance() {
             else {
                 continue;
             };
-            let centre = frames.poses[*l].inverse() * Point3::from(shape_centre(&shape));
+            let centre = frames.poses[*l].inverse() * Point3::from(shape.center());
             let exact = if h.plane_distance(&centre.coords.into()) <= 0.0 {
                 // Inside the link's solid: any overlap is a penetration.
                 0.0f64.min(r)
@@ -352,7 +334,7 @@ fn a_berry_at_the_hands_flat_face_is_never_cleared_as_optimal() {
     let q_end = trajectory.points.last().unwrap().positions.clone();
     // The middle of the hand mesh's largest triangle: far from any vertex.
     let hand = robot.link_index("panda_hand").unwrap();
-    let (_, hull) = mesh_links(&robot)
+    let (_, hull) = mesh_hulls(&robot)
         .into_iter()
         .find(|(l, _)| *l == hand)
         .unwrap();
@@ -382,13 +364,7 @@ fn a_berry_at_the_hands_flat_face_is_never_cleared_as_optimal() {
     let radius = 0.012;
     let pose = robot.fk(&q_end).poses[hand];
     let centre = (pose * Point3::from(centroid + n * (radius + 0.5 * req.clearance_m))).coords;
-    req.obstacles = vec![Obstacle {
-        id: "berry".into(),
-        shape: ObstacleShape::Sphere {
-            center: centre.into(),
-            radius,
-        },
-    }];
+    req.obstacles = vec![sphere("berry", centre.into(), radius)];
     let problem = req.validate(&robot).unwrap();
     let report = problem.evaluate(&mean);
     let reported = report.min_clearance_m.unwrap();

@@ -3,23 +3,15 @@
 //! scan of every face answers, and both equal the brute-force minimum over
 //! the hull's triangles, on the shipped Panda's hulls (also rigidly moved).
 
+use crate::common::robot::{mesh_hulls, panda};
 use dpmp::robot::hull::ConvexHull;
 use dpmp::robot::hull_query::segment_triangle_distance;
-use dpmp::robot::{Robot, ShapeGeometry};
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 fn panda_hulls() -> Vec<ConvexHull> {
-    Robot::panda()
-        .unwrap()
-        .collision_shapes()
-        .iter()
-        .filter_map(|s| match &s.geometry {
-            ShapeGeometry::Convex(h) => Some(h.clone()),
-            _ => None,
-        })
-        .collect()
+    mesh_hulls(&panda()).into_iter().map(|(_, h)| h).collect()
 }
 
 /// Exact distance from a segment outside the hull: the minimum over every

@@ -1,25 +1,12 @@
 //! Forward kinematics and Jacobians of the robot model, checked against
 //! central finite differences over random configurations.
 
+use crate::common::robot::{at_fractions, panda};
 use dpmp::robot::{Robot, PANDA_HOME};
 use nalgebra::{Point3, UnitQuaternion, Vector3};
 use proptest::prelude::*;
 
 const H: f64 = 1e-6;
-
-fn panda() -> Robot {
-    Robot::panda().unwrap()
-}
-
-/// A configuration inside the Panda's limits from unit-interval fractions.
-fn within_limits(robot: &Robot, fractions: &[f64]) -> Vec<f64> {
-    robot
-        .limits()
-        .iter()
-        .zip(fractions)
-        .map(|(l, f)| l.lower + f * (l.upper - l.lower))
-        .collect()
-}
 
 fn nudged(q: &[f64], i: usize, h: f64) -> Vec<f64> {
     let mut q = q.to_vec();
@@ -37,7 +24,7 @@ proptest! {
         offset in proptest::array::uniform3(-0.1f64..0.1),
     ) {
         let robot = panda();
-        let q = within_limits(&robot, &fractions);
+        let q = at_fractions(&robot, &fractions);
         let frames = robot.fk(&q);
         let link = link_pick % robot.link_names().len();
         let local = Point3::from(Vector3::from(offset));
@@ -55,7 +42,7 @@ proptest! {
     #[test]
     fn tcp_jacobian_matches_finite_differences(fractions in proptest::collection::vec(0.02f64..0.98, 7)) {
         let robot = panda();
-        let q = within_limits(&robot, &fractions);
+        let q = at_fractions(&robot, &fractions);
         let jac = robot.tcp_jacobian(&q);
         for i in 0..robot.dof() {
             let plus = robot.tcp_pose(&nudged(&q, i, H));
@@ -71,7 +58,7 @@ proptest! {
     #[test]
     fn tcp_pose_equals_the_last_frame(fractions in proptest::collection::vec(0.0f64..1.0, 7)) {
         let robot = panda();
-        let q = within_limits(&robot, &fractions);
+        let q = at_fractions(&robot, &fractions);
         let frames = robot.fk(&q);
         let tcp = robot.tcp_pose(&q);
         let last = frames.poses[robot.tcp_link()];

@@ -3,11 +3,12 @@
 //! shipped Panda; binary STL, ASCII STL, OBJ and `scale` give the same
 //! geometry; bad meshes are errors naming the URDF element and the file.
 
+use crate::common::scene::sphere;
 use dpmp::optim::example::{typical_request, ExampleSettings};
 use dpmp::optim::optimize;
 use dpmp::robot::mesh::{MeshFormat, TriangleMesh};
 use dpmp::robot::{Robot, PANDA_HOME, PANDA_MESHES, PANDA_URDF};
-use dpmp::scene::{Obstacle, ObstacleShape, Scene};
+use dpmp::scene::Scene;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::path::{Path, PathBuf};
@@ -48,17 +49,12 @@ fn cluster() -> Scene {
         (0..12)
             .map(|i| {
                 let t = i as f64;
-                Obstacle {
-                    id: format!("b{i}"),
-                    shape: ObstacleShape::Sphere {
-                        center: [
-                            tcp.x + 0.05 + 0.02 * (t * 1.7).sin(),
-                            tcp.y - 0.1 + 0.018 * t,
-                            tcp.z - 0.05 + 0.03 * (t * 0.9).cos(),
-                        ],
-                        radius: 0.015,
-                    },
-                }
+                let center = [
+                    tcp.x + 0.05 + 0.02 * (t * 1.7).sin(),
+                    tcp.y - 0.1 + 0.018 * t,
+                    tcp.z - 0.05 + 0.03 * (t * 0.9).cos(),
+                ];
+                sphere(&format!("b{i}"), center, 0.015)
             })
             .collect(),
     )

@@ -2,21 +2,12 @@
 //! signs, normals, the broad phase against brute force, and the clearance
 //! gradient against central finite differences.
 
+use crate::common::robot::{at_fractions, panda};
+use crate::common::scene::sphere;
 use dpmp::robot::{Robot, ShapeGeometry, PANDA_HOME};
 use dpmp::scene::{Obstacle, ObstacleShape, Scene};
 use nalgebra::{Point3, Vector3};
 use proptest::prelude::*;
-
-fn panda() -> Robot {
-    Robot::panda().unwrap()
-}
-
-fn sphere(id: &str, center: [f64; 3], radius: f64) -> Obstacle {
-    Obstacle {
-        id: id.into(),
-        shape: ObstacleShape::Sphere { center, radius },
-    }
-}
 
 /// Exact signed distance from a ball to every robot primitive, in f64.
 fn closed_form_sphere_clearance(
@@ -41,15 +32,6 @@ fn closed_form_sphere_clearance(
         })
         .min_by(|a, b| a.0.total_cmp(&b.0))
         .unwrap()
-}
-
-fn configuration(robot: &Robot, fractions: &[f64]) -> Vec<f64> {
-    robot
-        .limits()
-        .iter()
-        .zip(fractions)
-        .map(|(l, f)| l.lower + f * (l.upper - l.lower))
-        .collect()
 }
 
 /// A cluster of 20 berries (with stems) around the paper's berry workspace.
@@ -86,7 +68,7 @@ proptest! {
         radius in 0.005f64..0.1,
     ) {
         let robot = panda();
-        let q = configuration(&robot, &fractions);
+        let q = at_fractions(&robot, &fractions);
         let center = [center[0], center[1], center[2] + 0.5];
         let scene = Scene::new(vec![sphere("s", center, radius)]).unwrap();
         let c = scene.min_clearance(&robot, &robot.fk(&q)).unwrap();
@@ -110,7 +92,7 @@ proptest! {
         activation in 0.01f64..0.3,
     ) {
         let robot = panda();
-        let q = configuration(&robot, &fractions);
+        let q = at_fractions(&robot, &fractions);
         let frames = robot.fk(&q);
         let scene = Scene::new(berry_cluster()).unwrap();
         let within = scene.clearances_within(&robot, &frames, activation);

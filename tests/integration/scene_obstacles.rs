@@ -1,6 +1,7 @@
 //! Obstacle JSON (the request schema) and validation errors that name the
 //! field and the obstacle id.
 
+use crate::common::scene::{obstacle, sphere};
 use dpmp::scene::{Obstacle, ObstacleShape, Scene, SceneFile};
 
 const REQUEST_OBSTACLES: &str = r#"{"obstacles": [
@@ -73,22 +74,8 @@ fn unknown_fields_missing_ids_and_unknown_types_are_rejected() {
     assert!(parse(r#"{"obstacles": [], "extra": 1}"#).is_err());
 }
 
-fn obstacle(id: &str, shape: ObstacleShape) -> Obstacle {
-    Obstacle {
-        id: id.into(),
-        shape,
-    }
-}
-
-fn sphere(id: &str, radius: f64) -> Obstacle {
-    obstacle(
-        id,
-        ObstacleShape::Sphere {
-            center: [0.5, 0.0, 0.5],
-            radius,
-        },
-    )
-}
+/// Where the spheres of the validation tests sit.
+const CENTRE: [f64; 3] = [0.5, 0.0, 0.5];
 
 fn error_of(obstacles: Vec<Obstacle>) -> (String, String) {
     let e = Scene::new(obstacles).unwrap_err();
@@ -98,23 +85,26 @@ fn error_of(obstacles: Vec<Obstacle>) -> (String, String) {
 #[test]
 fn bad_obstacles_name_the_field_and_the_id() {
     let (field, msg) = error_of(vec![
-        sphere("a", 0.1),
-        sphere("b", 0.1),
-        sphere("berry-2", -0.01),
+        sphere("a", CENTRE, 0.1),
+        sphere("b", CENTRE, 0.1),
+        sphere("berry-2", CENTRE, -0.01),
     ]);
     assert_eq!(field, "obstacles[2].radius");
     assert!(msg.contains("berry-2"), "{msg}");
 
-    let mut nan = sphere("n", 0.1);
+    let mut nan = sphere("n", CENTRE, 0.1);
     if let ObstacleShape::Sphere { center, .. } = &mut nan.shape {
         center[1] = f64::NAN;
     }
     assert_eq!(error_of(vec![nan]).0, "obstacles[0].center[1]");
 
-    let (field, msg) = error_of(vec![sphere("dup", 0.1), sphere("dup", 0.2)]);
+    let (field, msg) = error_of(vec![sphere("dup", CENTRE, 0.1), sphere("dup", CENTRE, 0.2)]);
     assert_eq!(field, "obstacles[1].id");
     assert!(msg.contains("dup"));
-    assert_eq!(error_of(vec![sphere(" ", 0.1)]).0, "obstacles[0].id");
+    assert_eq!(
+        error_of(vec![sphere(" ", CENTRE, 0.1)]).0,
+        "obstacles[0].id"
+    );
 
     let flat_box = obstacle(
         "tray",

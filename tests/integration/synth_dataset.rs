@@ -2,6 +2,7 @@
 //! worker counts, the manifest contract, statistics against the real data's
 //! band, and validation before anything is written.
 
+use crate::common::json::read_json;
 use dpmp::perception::locate_target;
 use dpmp::robot::Robot;
 use dpmp::synth::dataset::{load_depth, load_image, load_manifest, load_record};
@@ -118,8 +119,7 @@ fn a_colour_only_dataset_of_format_1_still_loads() {
     generate(&g, &options(tmp.path(), 1)).unwrap();
     // Rewrite the manifest as version 1 wrote it: old tag, no depth fields.
     let path = tmp.path().join("manifest.json");
-    let mut m: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    let mut m = read_json(&path);
     m["format"] = "dpmp-dataset/1".into();
     m["settings"].as_object_mut().unwrap().remove("depth");
     std::fs::write(&path, serde_json::to_string(&m).unwrap()).unwrap();

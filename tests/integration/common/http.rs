@@ -1,8 +1,10 @@
 //! Shared helpers of the HTTP integration tests: a server on an ephemeral
-//! loopback port, a blocking client, and checks of responses against
+//! loopback port (with or without the shipped model), a blocking client,
+//! answers without their wall-clock fields, and checks of responses against
 //! `api/openapi.yaml`.
 
 use super::schema;
+use dpmp::net::Model;
 use dpmp::service::{AppState, RunningServer, ServiceConfig};
 use serde_json::Value;
 use std::time::Duration;
@@ -19,6 +21,35 @@ pub fn test_config() -> ServiceConfig {
 pub fn start(config: ServiceConfig) -> RunningServer {
     let robot = dpmp::robot::Robot::panda().unwrap();
     RunningServer::start(AppState::new(config, robot, None).unwrap()).unwrap()
+}
+
+/// A server with the shipped robot and model (`models/default`).
+pub fn start_with_default_model() -> RunningServer {
+    let model = Model::load(&super::default_model_dir())
+        .expect("models/default is committed with the repository");
+    let state = AppState::new(
+        test_config(),
+        dpmp::robot::Robot::panda().unwrap(),
+        Some(model),
+    )
+    .unwrap();
+    RunningServer::start(state).unwrap()
+}
+
+/// The body with every `solve_ms` (the one timing field) removed.
+pub fn without_timing(mut v: Value) -> Value {
+    fn strip(v: &mut Value) {
+        match v {
+            Value::Object(map) => {
+                map.remove("solve_ms");
+                map.values_mut().for_each(strip);
+            }
+            Value::Array(items) => items.iter_mut().for_each(strip),
+            _ => {}
+        }
+    }
+    strip(&mut v);
+    v
 }
 
 /// A blocking client with a generous timeout (tests must not hang).

@@ -1,0 +1,18 @@
+//! Generated typical optimiser requests, as structs and as JSON bodies.
+
+use dpmp::optim::example::{typical_request, ExampleSettings};
+use dpmp::optim::OptimizeRequest;
+use dpmp::robot::Robot;
+use serde_json::Value;
+
+/// The shipped Panda and the typical request of `seed` with `settings`.
+pub fn typical(seed: u64, settings: &ExampleSettings) -> (Robot, OptimizeRequest) {
+    let robot = Robot::panda().unwrap();
+    let request = typical_request(&robot, seed, settings).unwrap();
+    (robot, request)
+}
+
+/// The typical request of `seed` with `settings` (for the Panda) as JSON.
+pub fn typical_json(seed: u64, settings: &ExampleSettings) -> Value {
+    serde_json::to_value(typical(seed, settings).1).unwrap()
+}
