@@ -24,6 +24,8 @@
 //!
 //! - [`promp`] — basis, fitting, weight distributions, conditioning, the
 //!   paper's covariance codec and annotation import.
+//! - [`geometry`] — the `[x, y, z, w]` quaternion convention and segment
+//!   distances, shared by the robot and the scene.
 //! - [`robot`] — URDF loading, kinematics, Jacobians, inverse kinematics,
 //!   link collision shapes.
 //! - [`scene`] — obstacles and signed-distance queries against the robot.
@@ -54,6 +56,7 @@ pub mod cli;
 pub mod demos;
 pub mod error;
 pub mod fsio;
+pub mod geometry;
 pub mod net;
 pub mod optim;
 pub mod perception;

@@ -1,6 +1,7 @@
 //! `dpmp robot`: forward kinematics, clearance, inverse kinematics and
 //! collision primitives of the robot model, printed as JSON.
 
+use crate::geometry::quaternion::to_xyzw;
 use crate::robot::{IkOptions, IkTarget, Robot};
 use crate::scene::{Clearance, Scene};
 use crate::{Error, Result};
@@ -141,10 +142,9 @@ pub fn fk_json(robot: &Robot, q_text: &str) -> Result<Value> {
     let frames = robot.fk(&q);
     let mut out = Map::new();
     for (name, pose) in robot.link_names().iter().zip(&frames.poses) {
-        let r = pose.rotation;
         out.insert(
             name.clone(),
-            json!({"position": pose.translation.vector.as_slice(), "quaternion": [r.i, r.j, r.k, r.w]}),
+            json!({"position": pose.translation.vector.as_slice(), "quaternion": to_xyzw(&pose.rotation)}),
         );
     }
     Ok(json!({"joint_names": robot.joint_names(), "q": q, "frames": out}))

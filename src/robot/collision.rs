@@ -15,6 +15,7 @@ use super::hull::ConvexHull;
 use super::mesh::{MeshFormat, TriangleMesh};
 use super::mesh_files::MeshFiles;
 use crate::error::ensure_positive;
+use crate::geometry::{point_segment_distance, quaternion};
 use crate::{Error, Result};
 use nalgebra::{Isometry3, Point3};
 use serde::Serialize;
@@ -84,12 +85,12 @@ impl ShapeGeometry {
                 half_extents,
                 rotation,
             } => {
-                let q = quaternion_xyzw(rotation);
+                let q = quaternion::from_xyzw(rotation);
                 let r = pose.rotation * q;
                 ShapeGeometry::Box {
                     center: map(center),
                     half_extents: *half_extents,
-                    rotation: [r.i, r.j, r.k, r.w],
+                    rotation: quaternion::to_xyzw(&r),
                 }
             }
             ShapeGeometry::Convex(hull) => ShapeGeometry::Convex(hull.transformed(pose)),
@@ -120,8 +121,7 @@ impl ShapeGeometry {
     pub fn signed_distance(&self, p: &[f64; 3]) -> f64 {
         match self {
             ShapeGeometry::Capsule { a, b, radius } => {
-                super::hull::point_segment_distance(&(*p).into(), &(*a).into(), &(*b).into())
-                    - radius
+                point_segment_distance(&(*p).into(), &(*a).into(), &(*b).into()) - radius
             }
             ShapeGeometry::Convex(hull) => hull.signed_distance(p),
             ShapeGeometry::Sphere { center, radius } => {
@@ -132,7 +132,7 @@ impl ShapeGeometry {
                 half_extents,
                 rotation,
             } => {
-                let q = quaternion_xyzw(rotation);
+                let q = quaternion::from_xyzw(rotation);
                 let local = q.inverse() * (Point3::from(*p) - Point3::from(*center));
                 let outside =
                     nalgebra::Vector3::from_fn(|i, _| (local[i].abs() - half_extents[i]).max(0.0));
@@ -191,7 +191,7 @@ pub fn geometry_from_urdf(
             ShapeGeometry::Box {
                 center: [0.0; 3],
                 half_extents: size.0.map(|s| 0.5 * s),
-                rotation: [0.0, 0.0, 0.0, 1.0],
+                rotation: quaternion::IDENTITY_XYZW,
             }
         }
         urdf_rs::Geometry::Mesh { filename, scale } => {
@@ -235,11 +235,6 @@ fn ensure_non_negative(field: &str, value: f64) -> Result<()> {
             format!("must be a finite number >= 0, got {value}"),
         ))
     }
-}
-
-/// Unit quaternion from `[x, y, z, w]` (the project's convention).
-fn quaternion_xyzw(r: &[f64; 4]) -> nalgebra::UnitQuaternion<f64> {
-    nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(r[3], r[0], r[1], r[2]))
 }
 
 #[cfg(test)]

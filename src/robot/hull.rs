@@ -21,6 +21,7 @@
 
 use super::hull_topology::HullTopology;
 use super::mesh::TriangleMesh;
+use crate::geometry::point_segment_distance;
 use nalgebra::{Point3, Vector3};
 use parry3d::shape::ConvexPolyhedron;
 use std::sync::Arc;
@@ -380,12 +381,6 @@ fn bounding_capsule(points: &[[f64; 3]]) -> ([f64; 3], [f64; 3], f64) {
         .map(|p| point_segment_distance(&Vector3::from(*p), &a, &b))
         .fold(0.0, f64::max);
     (a.into(), b.into(), radius * (1.0 + 1e-9) + 1e-9)
-}
-
-/// Distance from `p` to the segment `a`–`b`.
-pub fn point_segment_distance(p: &Vector3<f64>, a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
-    let (_, y) = super::hull_query::closest_segments(p, p, a, b);
-    (y - p).norm()
 }
 
 fn dist(a: &[f64; 3], b: &[f64; 3]) -> f64 {

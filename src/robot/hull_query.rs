@@ -33,6 +33,7 @@
 //! robot side of the clearance does not use it.
 
 use super::hull::{closest_on_triangle, ConvexHull};
+use crate::geometry::closest_segments;
 use nalgebra::Vector3;
 
 /// The closest features of a hull and a segment (hull frame).
@@ -397,47 +398,6 @@ fn segment_triangle_closest(
     (best.1, best.2)
 }
 
-/// Closest points between segments `p1`–`q1` and `p2`–`q2` (Ericson,
-/// "Real-Time Collision Detection" §5.1.9).
-pub fn closest_segments(
-    p1: &Vector3<f64>,
-    q1: &Vector3<f64>,
-    p2: &Vector3<f64>,
-    q2: &Vector3<f64>,
-) -> (Vector3<f64>, Vector3<f64>) {
-    let (d1, d2, r) = (q1 - p1, q2 - p2, p1 - p2);
-    let (a, e, f) = (d1.norm_squared(), d2.norm_squared(), d2.dot(&r));
-    const EPS: f64 = 1e-18;
-    let (s, t) = if a <= EPS && e <= EPS {
-        (0.0, 0.0)
-    } else if a <= EPS {
-        (0.0, (f / e).clamp(0.0, 1.0))
-    } else {
-        let c = d1.dot(&r);
-        if e <= EPS {
-            ((-c / a).clamp(0.0, 1.0), 0.0)
-        } else {
-            let b = d1.dot(&d2);
-            let denom = a * e - b * b;
-            let mut s = if denom > EPS {
-                ((b * f - c * e) / denom).clamp(0.0, 1.0)
-            } else {
-                0.0
-            };
-            let mut t = (b * s + f) / e;
-            if t < 0.0 {
-                t = 0.0;
-                s = (-c / a).clamp(0.0, 1.0);
-            } else if t > 1.0 {
-                t = 1.0;
-                s = ((b - c) / a).clamp(0.0, 1.0);
-            }
-            (s, t)
-        }
-    };
-    (p1 + d1 * s, p2 + d2 * t)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -505,27 +465,5 @@ mod tests {
                 );
             }
         }
-    }
-
-    #[test]
-    fn closest_segments_handles_parallel_and_crossing() {
-        let z = Vector3::zeros;
-        let (x, y) = closest_segments(
-            &z(),
-            &Vector3::x(),
-            &Vector3::new(0.5, 1.0, -1.0),
-            &Vector3::new(0.5, 1.0, 1.0),
-        );
-        assert!(
-            (x - Vector3::new(0.5, 0.0, 0.0)).norm() < 1e-12
-                && (y - Vector3::new(0.5, 1.0, 0.0)).norm() < 1e-12
-        );
-        let (x, y) = closest_segments(
-            &z(),
-            &Vector3::x(),
-            &Vector3::new(0.0, 1.0, 0.0),
-            &Vector3::new(1.0, 1.0, 0.0),
-        );
-        assert!(((x - y).norm() - 1.0).abs() < 1e-12);
     }
 }

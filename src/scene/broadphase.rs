@@ -1,7 +1,8 @@
 //! The broad phase: axis-aligned bounding boxes in f64 and the gap between
-//! two of them, a lower bound on the distance between what they bound.
+//! two of them, a lower bound on the distance between what they bound; and
+//! the capsule around a shape ([`Core`]), whose gap is a tighter bound.
 
-use crate::robot::hull_query::closest_segments;
+use crate::geometry::{quaternion, segment_distance};
 use crate::robot::ShapeGeometry;
 use nalgebra::{UnitQuaternion, Vector3};
 
@@ -91,16 +92,54 @@ impl Bounds {
     }
 }
 
-/// Distance between the segments `p1`–`q1` and `p2`–`q2` (closest points
-/// from [`closest_segments`]); points are segments of zero length.
-pub fn segment_distance(
-    p1: &Vector3<f64>,
-    q1: &Vector3<f64>,
-    p2: &Vector3<f64>,
-    q2: &Vector3<f64>,
-) -> f64 {
-    let (x, y) = closest_segments(p1, q1, p2, q2);
-    (x - y).norm()
+/// A capsule (segment `a`–`b` swept by `radius`) that contains a shape: the
+/// distance between two cores, less both radii, is a lower bound on the
+/// distance between the shapes (exact for balls and capsules).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Core {
+    /// First end of the segment.
+    pub a: Vector3<f64>,
+    /// Second end of the segment.
+    pub b: Vector3<f64>,
+    /// Radius around the segment.
+    pub radius: f64,
+}
+
+impl Core {
+    /// A core from its segment and radius.
+    pub fn new(a: Vector3<f64>, b: Vector3<f64>, radius: f64) -> Core {
+        Core { a, b, radius }
+    }
+
+    /// The core around a base-frame robot primitive.
+    pub fn of_geometry(geometry: &ShapeGeometry) -> Core {
+        match geometry {
+            ShapeGeometry::Capsule { a, b, radius } => {
+                Core::new(Vector3::from(*a), Vector3::from(*b), *radius)
+            }
+            ShapeGeometry::Sphere { center, radius } => {
+                Core::new(Vector3::from(*center), Vector3::from(*center), *radius)
+            }
+            ShapeGeometry::Box {
+                center,
+                half_extents,
+                ..
+            } => {
+                let c = Vector3::from(*center);
+                Core::new(c, c, Vector3::from(*half_extents).norm())
+            }
+            ShapeGeometry::Convex(hull) => {
+                let (a, b, r) = hull.bound();
+                Core::new(Vector3::from(a), Vector3::from(b), r)
+            }
+        }
+    }
+
+    /// Lower bound on the distance between shapes inside `self` and `other`.
+    #[inline]
+    pub fn gap(&self, other: &Core) -> f64 {
+        segment_distance(&self.a, &self.b, &other.a, &other.b) - self.radius - other.radius
+    }
 }
 
 /// Bounds of a robot primitive already expressed in the base frame.
@@ -117,7 +156,7 @@ pub fn geometry_bounds(geometry: &ShapeGeometry) -> Bounds {
         } => Bounds::oriented_box(
             &Vector3::from(*center),
             &Vector3::from(*half_extents),
-            &super::shape::unit_quaternion(rotation),
+            &quaternion::from_xyzw(rotation),
         ),
         ShapeGeometry::Convex(hull) => {
             let (a, b, r) = hull.bound();
@@ -129,59 +168,6 @@ pub fn geometry_bounds(geometry: &ShapeGeometry) -> Bounds {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn segment_distance_matches_dense_sampling() {
-        let cases = [
-            (
-                [0.0, 0.0, 0.0],
-                [1.0, 0.0, 0.0],
-                [0.5, 1.0, -1.0],
-                [0.5, 1.0, 1.0],
-                1.0,
-            ),
-            (
-                [0.0, 0.0, 0.0],
-                [1.0, 0.0, 0.0],
-                [2.0, 0.0, 0.0],
-                [3.0, 1.0, 0.0],
-                1.0,
-            ),
-            (
-                [0.0, 0.0, 0.0],
-                [1.0, 0.0, 0.0],
-                [0.0, 0.5, 0.0],
-                [1.0, 0.5, 0.0],
-                0.5,
-            ),
-            (
-                [0.2, 0.3, 0.1],
-                [0.2, 0.3, 0.1],
-                [0.0, 0.0, 0.0],
-                [0.0, 0.0, 1.0],
-                0.36055512754639896,
-            ),
-        ];
-        for (p1, q1, p2, q2, expect) in cases {
-            let (p1, q1, p2, q2) = (
-                Vector3::from(p1),
-                Vector3::from(q1),
-                Vector3::from(p2),
-                Vector3::from(q2),
-            );
-            let d = segment_distance(&p1, &q1, &p2, &q2);
-            assert!((d - expect).abs() < 1e-12, "{d} vs {expect}");
-            let mut brute = f64::INFINITY;
-            for i in 0..=200 {
-                for j in 0..=200 {
-                    let x = p1 + (q1 - p1) * (i as f64 / 200.0);
-                    let y = p2 + (q2 - p2) * (j as f64 / 200.0);
-                    brute = brute.min((x - y).norm());
-                }
-            }
-            assert!(d <= brute + 1e-12 && brute - d < 1e-2, "{d} vs {brute}");
-        }
-    }
 
     #[test]
     fn gap_is_euclidean_between_separated_boxes_and_zero_when_overlapping() {

@@ -8,9 +8,9 @@
 //! pairs whose boxes are further apart than the current best (or the
 //! activation distance) never reach parry.
 
-use super::broadphase::{geometry_bounds, Bounds};
+use super::broadphase::{geometry_bounds, Bounds, Core};
 use super::distance::{pair_contact, PairContact};
-use super::shape::{CompiledObstacle, Core, RobotPart};
+use super::shape::{CompiledObstacle, RobotPart};
 use super::Scene;
 use crate::robot::{Frames, Robot, ShapeGeometry};
 use nalgebra::{DVector, Point3};

@@ -105,7 +105,7 @@ pub struct SceneFile {
 }
 
 fn identity_rotation() -> [f64; 4] {
-    [0.0, 0.0, 0.0, 1.0]
+    crate::geometry::quaternion::IDENTITY_XYZW
 }
 
 fn default_stem_radius() -> f64 {

@@ -4,11 +4,12 @@
 //! both shapes relative to a local origin near them (see
 //! [`super::distance`]), so parts keep their poses in `f64` here.
 
-use super::broadphase::Bounds;
+use super::broadphase::{Bounds, Core};
 use super::obstacle::ObstacleShape;
+use crate::geometry::quaternion;
 use crate::robot::hull::ConvexHull;
 use crate::robot::ShapeGeometry;
-use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use parry3d::shape::{Ball, Capsule, ConvexPolyhedron, Cuboid, Cylinder, SharedShape};
 
 /// One convex part of an obstacle: a parry shape in its own frame and that
@@ -39,11 +40,6 @@ pub struct CompiledObstacle {
     pub parts: Vec<Part>,
     /// Bounds of all parts.
     pub bounds: Bounds,
-}
-
-/// Normalised quaternion from `[x, y, z, w]`.
-pub fn unit_quaternion(q: &[f64; 4]) -> UnitQuaternion<f64> {
-    UnitQuaternion::from_quaternion(Quaternion::new(q[3], q[0], q[1], q[2]))
 }
 
 /// Compile a validated obstacle; `None` only if parry rejects a hull that
@@ -80,7 +76,7 @@ pub fn compile_obstacle(shape: &ObstacleShape) -> Option<CompiledObstacle> {
             half_extents,
             rotation,
         } => {
-            let rotation = unit_quaternion(rotation);
+            let rotation = quaternion::from_xyzw(rotation);
             let h = v(half_extents);
             let pose = Isometry3::from_parts(Translation3::from(v(center)), rotation);
             let shape = SharedShape::new(Cuboid::new(to_glam(&h)));
@@ -169,58 +165,6 @@ fn capsule_part(a: &Vector3<f64>, b: &Vector3<f64>, radius: f64) -> Part {
     }
 }
 
-/// A capsule (segment `a`–`b` swept by `radius`) that contains a shape: the
-/// distance between two cores, less both radii, is a lower bound on the
-/// distance between the shapes (exact for balls and capsules).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Core {
-    /// First end of the segment.
-    pub a: Vector3<f64>,
-    /// Second end of the segment.
-    pub b: Vector3<f64>,
-    /// Radius around the segment.
-    pub radius: f64,
-}
-
-impl Core {
-    /// A core from its segment and radius.
-    pub fn new(a: Vector3<f64>, b: Vector3<f64>, radius: f64) -> Core {
-        Core { a, b, radius }
-    }
-
-    /// The core around a base-frame robot primitive.
-    pub fn of_geometry(geometry: &ShapeGeometry) -> Core {
-        match geometry {
-            ShapeGeometry::Capsule { a, b, radius } => {
-                Core::new(Vector3::from(*a), Vector3::from(*b), *radius)
-            }
-            ShapeGeometry::Sphere { center, radius } => {
-                Core::new(Vector3::from(*center), Vector3::from(*center), *radius)
-            }
-            ShapeGeometry::Box {
-                center,
-                half_extents,
-                ..
-            } => {
-                let c = Vector3::from(*center);
-                Core::new(c, c, Vector3::from(*half_extents).norm())
-            }
-            ShapeGeometry::Convex(hull) => {
-                let (a, b, r) = hull.bound();
-                Core::new(Vector3::from(a), Vector3::from(b), r)
-            }
-        }
-    }
-
-    /// Lower bound on the distance between shapes inside `self` and `other`.
-    #[inline]
-    pub fn gap(&self, other: &Core) -> f64 {
-        super::broadphase::segment_distance(&self.a, &self.b, &other.a, &other.b)
-            - self.radius
-            - other.radius
-    }
-}
-
 /// A robot primitive (already in the base frame) as a parry shape in a local
 /// frame plus that frame's pose.
 pub enum RobotPart {
@@ -273,7 +217,7 @@ impl RobotPart {
                 Cuboid::new(to_glam(&Vector3::from(*half_extents))),
                 Isometry3::from_parts(
                     Translation3::from(Vector3::from(*center)),
-                    unit_quaternion(rotation),
+                    quaternion::from_xyzw(rotation),
                 ),
             ),
         }

@@ -74,7 +74,7 @@ pub fn plant_obstacles(plant: &Plant) -> Vec<Obstacle> {
         shape: ObstacleShape::Box {
             center: arr(&t.center),
             half_extents: [t.half_extents.x, t.half_extents.y, t.half_extents.z],
-            rotation: [0.0, 0.0, 0.0, 1.0],
+            rotation: crate::geometry::quaternion::IDENTITY_XYZW,
         },
     });
     berries.chain(stems).chain(leaves).chain(tray).collect()
