@@ -24,7 +24,7 @@
 //! and keeps the fastest (the solve is deterministic; only the time varies).
 
 use criterion::{black_box, Criterion};
-use dpmp::optim::example::{typical_request, ExampleSettings};
+use dpmp::fixtures::{typical_request, ExampleSettings};
 use dpmp::optim::{optimize, Boundary, InnerSolver, OptimizeRequest, SolveControl, Status};
 use dpmp::robot::Robot;
 use std::time::Instant;

@@ -41,6 +41,8 @@
 //! - [`service`] — the axum HTTP service.
 //! - [`bench`] — the offline benchmark runner.
 //! - [`plot`] — shared plotting helpers (plotters).
+//! - [`fixtures`] — generated typical optimiser requests for benchmarks,
+//!   tests and examples.
 //! - [`fsio`] — whole-or-nothing file writes, shared by every writer.
 //! - [`progress`] — progress bars on stderr for long work.
 //!
@@ -55,6 +57,7 @@ pub mod bench;
 pub mod cli;
 pub mod demos;
 pub mod error;
+pub mod fixtures;
 pub mod fsio;
 pub mod geometry;
 pub mod net;

@@ -190,7 +190,7 @@ pub fn predict_and_optimize(
         None => prediction.distribution,
     };
     let prior = prior_trajectory(&distribution, &basis);
-    request.prior = crate::optim::example::prior_spec(&distribution);
+    request.prior = crate::optim::PriorSpec::from(&distribution);
     let result = optimize_with(&request, robot, ctl)?;
     Ok(PlanResponse {
         result,

@@ -42,7 +42,7 @@
 use super::problem_file::{Expect, Meta, ProblemFile, CATEGORIES};
 use super::synth_target::{bench_generator, draw_target, SynthTarget};
 use super::witness::{find_witness, pin_start, reports, validated};
-use crate::optim::example::{random_unit, tcp_path};
+use crate::geometry::random_unit;
 use crate::promp::{fit_weights, Basis, WeightDistribution};
 use crate::robot::Robot;
 use crate::scene::{Obstacle, ObstacleShape, Scene};
@@ -311,7 +311,7 @@ fn mean_path(robot: &Robot, basis: &Basis, dist: &WeightDistribution) -> MeanPat
     MeanPath {
         start: q.row(0).iter().copied().collect(),
         end: q.row(q.nrows() - 1).iter().copied().collect(),
-        tcp: tcp_path(robot, &q),
+        tcp: robot.tcp_path(&q),
     }
 }
 

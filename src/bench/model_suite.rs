@@ -15,7 +15,6 @@
 
 use super::problem_file::{Expect, Meta, ProblemFile};
 use crate::net::Model;
-use crate::optim::example::prior_spec;
 use crate::synth::dataset::{load_image, load_manifest, load_record, TargetEntry};
 use crate::{Error, Result};
 use serde_json::json;
@@ -70,7 +69,7 @@ pub fn target_problem(
         record.target_depth_m,
     )?;
     let request = json!({
-        "prior": prior_spec(&prediction.distribution),
+        "prior": crate::optim::PriorSpec::from(&prediction.distribution),
         "promp": record.promp,
         "duration_s": record.duration_s,
         "obstacles": record.scene.obstacles,

@@ -12,7 +12,7 @@
 
 use super::problem_file::write_atomic;
 use crate::error::ensure_finite;
-use crate::optim::example::{typical_request, ExampleSettings};
+use crate::fixtures::{typical_request, ExampleSettings};
 use crate::optim::{optimize, Status};
 use crate::robot::Robot;
 use crate::{Error, Result};

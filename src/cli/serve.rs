@@ -80,8 +80,8 @@ pub fn run(args: ServeArgs) -> Result<()> {
     init_logging(args.log_json);
     let robot = args.robot.load()?;
     if let Some(seed) = args.print_typical_request {
-        let settings = crate::optim::example::ExampleSettings::default();
-        let request = crate::optim::example::typical_request(&robot, seed, &settings)?;
+        let settings = crate::fixtures::ExampleSettings::default();
+        let request = crate::fixtures::typical_request(&robot, seed, &settings)?;
         return crate::cli::print_json(&request);
     }
     let config = config_from_args(&args)?;

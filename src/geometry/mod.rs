@@ -4,9 +4,28 @@
 //! - [`quaternion`]: the project's `[x, y, z, w]` quaternion convention and
 //!   its conversions to and from nalgebra;
 //! - [`segment`]: closest points and distances between segments and points
-//!   (the kernel of capsule, hull and broad-phase distances).
+//!   (the kernel of capsule, hull and broad-phase distances);
+//! - [`random_unit`]: uniformly random directions.
 
 pub mod quaternion;
 pub mod segment;
 
 pub use segment::{closest_segments, point_segment_distance, segment_distance};
+
+use nalgebra::Vector3;
+use rand::Rng;
+
+/// A uniformly random unit vector (rejection sampling in the unit ball).
+pub fn random_unit(rng: &mut impl Rng) -> Vector3<f64> {
+    loop {
+        let v = Vector3::new(
+            rng.gen_range(-1.0..1.0),
+            rng.gen_range(-1.0..1.0),
+            rng.gen_range(-1.0..1.0),
+        );
+        let n = v.norm();
+        if n > 0.1 && n <= 1.0 {
+            return v / n;
+        }
+    }
+}

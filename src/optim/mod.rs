@@ -36,7 +36,6 @@ pub mod diagnose;
 pub mod dual_active_set;
 pub mod duration;
 mod evaluate;
-pub mod example;
 pub mod linear;
 pub mod nullspace;
 pub mod phases;

@@ -5,7 +5,7 @@
 //! decides early on which side of each obstacle the trajectory passes, and
 //! when it picks a side that leads nowhere it ends in a local minimum of the
 //! violation (`max_iterations`: the penalty reached its cap, or the
-//! iteration limit). On the typical problems (`optim::example`) most such
+//! iteration limit). On the typical problems (`fixtures::typical`) most such
 //! problems are feasible: a run started elsewhere finds a feasible answer.
 //! So [`Problem::solve`] restarts `options.restarts` times, each run from a
 //! draw `z ~ N(0, I)` of the whitened prior (seeded by `options.seed`),
@@ -140,7 +140,7 @@ impl Spent {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::optim::example::{typical_request, ExampleSettings};
+    use crate::fixtures::{typical_request, ExampleSettings};
     use crate::optim::nullspace::NullSpace;
     use crate::robot::Robot;
 

@@ -454,7 +454,7 @@ pub(super) struct Linearisation<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::optim::example::{typical_request, ExampleSettings};
+    use crate::fixtures::{typical_request, ExampleSettings};
 
     /// The QP of every candidate row, built without the working set.
     fn full_qp(p: &Problem, at: &Linearisation) -> Qp {

@@ -1,7 +1,7 @@
 //! Forward kinematics: the pose of every chain link in the base frame.
 
 use super::Robot;
-use nalgebra::Isometry3;
+use nalgebra::{DMatrix, Isometry3, Vector3};
 
 /// Poses of every link of [`Robot::link_names`] in the base frame.
 #[derive(Clone, Debug)]
@@ -31,6 +31,16 @@ impl Robot {
         self.steps.iter().fold(Isometry3::identity(), |pose, step| {
             step.child_pose(&pose, q)
         })
+    }
+
+    /// TCP positions along a `T x dof` trajectory (one row per sample).
+    pub fn tcp_path(&self, q: &DMatrix<f64>) -> Vec<Vector3<f64>> {
+        (0..q.nrows())
+            .map(|t| {
+                let row: Vec<f64> = q.row(t).iter().cloned().collect();
+                self.tcp_pose(&row).translation.vector
+            })
+            .collect()
     }
 }
 

@@ -1,6 +1,6 @@
 //! `dpmp optimize` end to end: JSON out, plot file, exit codes.
 
-use dpmp::optim::example::{typical_request, ExampleSettings};
+use dpmp::fixtures::{typical_request, ExampleSettings};
 use dpmp::robot::Robot;
 
 use crate::common::cli::{arg, dpmp, dpmp_ok, stderr};

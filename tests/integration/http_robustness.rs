@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 /// A smaller version of the typical request (50 samples, 3 obstacles) so
 /// that the many solves of this file stay fast in debug builds.
 fn typical_request(seed: u64) -> Value {
-    let settings = dpmp::optim::example::ExampleSettings {
+    let settings = dpmp::fixtures::ExampleSettings {
         n_obstacles: 3,
         ..Default::default()
     };

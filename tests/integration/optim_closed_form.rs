@@ -2,7 +2,7 @@
 //! conditioning, and convex instances agree with a tightly solved re-run.
 
 use crate::common::requests::typical;
-use dpmp::optim::example::ExampleSettings;
+use dpmp::fixtures::ExampleSettings;
 use dpmp::optim::whiten::Whitening;
 use dpmp::optim::{OptimizeRequest, SolveControl, Status};
 use dpmp::promp::{ViaPoint, WeightDistribution};

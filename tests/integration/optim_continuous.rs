@@ -5,8 +5,8 @@
 //! at 100× the verification sampling).
 
 use crate::common::scene::sphere;
+use dpmp::fixtures::{typical_request, ExampleSettings};
 use dpmp::optim::continuous::displacement_bound;
-use dpmp::optim::example::{typical_request, ExampleSettings};
 use dpmp::optim::{optimize, OptimizeRequest, PriorSpec, Status};
 use dpmp::promp::{Basis, PrompConfig};
 use dpmp::robot::{Robot, ShapeGeometry};

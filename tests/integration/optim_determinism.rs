@@ -2,7 +2,7 @@
 //! repeated runs and across 1 and 2 rayon worker threads, with the
 //! restarts (which run in parallel) included.
 
-use dpmp::optim::example::{typical_request, ExampleSettings};
+use dpmp::fixtures::{typical_request, ExampleSettings};
 use dpmp::optim::{optimize, OptimizeRequest, Status};
 use dpmp::robot::Robot;
 

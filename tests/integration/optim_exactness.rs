@@ -12,7 +12,7 @@
 //!   (cost 1e-7 relative; trajectory 1e-6 rad on the optimiser's grid QP,
 //!   1e-4 rad where dense verification made it solve a larger one).
 
-use dpmp::optim::example::{typical_request, ExampleSettings};
+use dpmp::fixtures::{typical_request, ExampleSettings};
 use dpmp::optim::qp::{Inequality, Qp, QpSettings};
 use dpmp::optim::whiten::Whitening;
 use dpmp::optim::{OptimizeRequest, PriorSpec, Problem, SolveControl, Status};
@@ -41,7 +41,7 @@ fn real_priors() -> Vec<PriorSpec> {
 }
 
 /// The real-like priors of the typical problems (seeds 0..6), which ship
-/// with the project (`optim::example`).
+/// with the project (`fixtures`).
 fn real_like_priors(robot: &Robot) -> Vec<PriorSpec> {
     (0..6)
         .map(|seed| {

@@ -4,7 +4,7 @@
 //! at 10× the optimisation sampling against Franka's published numbers.
 
 use crate::common::robot::panda;
-use dpmp::optim::example::{typical_request, ExampleSettings};
+use dpmp::fixtures::{typical_request, ExampleSettings};
 use dpmp::optim::{optimize, Boundary, OptimizeRequest, OptimizeResponse, Status};
 use dpmp::promp::{example::example_distribution, Basis, PrompConfig};
 use dpmp::robot::Robot;

@@ -3,7 +3,7 @@
 //! constraint under dense verification, and the cost is never below the
 //! unconstrained optimum (0) nor below the start-only optimum.
 
-use dpmp::optim::example::{typical_request, ExampleSettings};
+use dpmp::fixtures::{typical_request, ExampleSettings};
 use dpmp::optim::{optimize, PriorSpec, SolveControl, Status};
 use dpmp::robot::Robot;
 use proptest::prelude::*;

@@ -4,7 +4,7 @@
 
 use crate::common::requests::typical;
 use crate::common::scene::sphere;
-use dpmp::optim::example::ExampleSettings;
+use dpmp::fixtures::ExampleSettings;
 use dpmp::optim::{
     optimize, optimize_with, OptimizeRequest, OptimizeResponse, PriorSpec, SolveControl, Status,
 };

@@ -55,7 +55,7 @@ fn the_python_client_optimizes_plans_and_raises_the_servers_errors() {
     };
     let dir = tempfile::tempdir().unwrap();
     let robot = Robot::panda().unwrap();
-    let request = dpmp::optim::example::typical_request(&robot, 0, &Default::default()).unwrap();
+    let request = dpmp::fixtures::typical_request(&robot, 0, &Default::default()).unwrap();
     let request_path = dir.path().join("request.json");
     std::fs::write(&request_path, serde_json::to_string(&request).unwrap()).unwrap();
 

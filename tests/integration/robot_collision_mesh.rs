@@ -316,7 +316,7 @@ fn reported_clearance_never_exceeds_the_exact_mesh_distance() {
 
 #[test]
 fn a_berry_at_the_hands_flat_face_is_never_cleared_as_optimal() {
-    use dpmp::optim::example::{typical_request, ExampleSettings};
+    use dpmp::fixtures::{typical_request, ExampleSettings};
     use dpmp::optim::{optimize, Status};
     let robot = Robot::panda().unwrap();
     let settings = ExampleSettings {

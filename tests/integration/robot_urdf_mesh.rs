@@ -4,7 +4,7 @@
 //! geometry; bad meshes are errors naming the URDF element and the file.
 
 use crate::common::scene::sphere;
-use dpmp::optim::example::{typical_request, ExampleSettings};
+use dpmp::fixtures::{typical_request, ExampleSettings};
 use dpmp::optim::optimize;
 use dpmp::robot::mesh::{MeshFormat, TriangleMesh};
 use dpmp::robot::{Robot, PANDA_HOME, PANDA_MESHES, PANDA_URDF};

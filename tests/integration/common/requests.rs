@@ -1,6 +1,6 @@
 //! Generated typical optimiser requests, as structs and as JSON bodies.
 
-use dpmp::optim::example::{typical_request, ExampleSettings};
+use dpmp::fixtures::{typical_request, ExampleSettings};
 use dpmp::optim::OptimizeRequest;
 use dpmp::robot::Robot;
 use serde_json::Value;
