@@ -129,3 +129,75 @@ fn ik_and_shapes_print_json() {
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("--spacing"), "{err}");
 }
+
+/// The robot shapes wire format (`GET /v1/robot`, `dpmp robot shapes`),
+/// exactly: hand-built primitives, URDF primitives placed by rotated
+/// origins, and the shipped Panda's shapes and CLI output by hash.
+#[test]
+fn robot_shapes_json_is_pinned() {
+    use dpmp::robot::{LinkShape, Robot, ShapeGeometry};
+    use sha2::{Digest, Sha256};
+    let shape = |link: usize, geometry: ShapeGeometry| LinkShape {
+        link,
+        link_name: format!("l{link}"),
+        geometry,
+    };
+    let shapes = [
+        shape(
+            0,
+            ShapeGeometry::Capsule {
+                a: [0.0, 0.0, -0.1],
+                b: [0.0, 0.0, 0.1],
+                radius: 0.05,
+            },
+        ),
+        shape(
+            1,
+            ShapeGeometry::Sphere {
+                center: [0.1, 0.2, 0.3],
+                radius: 0.04,
+            },
+        ),
+        shape(
+            2,
+            ShapeGeometry::Box {
+                center: [0.0, 0.5, 0.0],
+                half_extents: [0.1, 0.2, 0.3],
+                rotation: [0.0, 0.0, 0.0, 1.0],
+            },
+        ),
+    ];
+    assert_eq!(
+        serde_json::to_string(&shapes).unwrap(),
+        r#"[{"link":0,"link_name":"l0","geometry":{"type":"capsule","a":[0.0,0.0,-0.1],"b":[0.0,0.0,0.1],"radius":0.05}},{"link":1,"link_name":"l1","geometry":{"type":"sphere","center":[0.1,0.2,0.3],"radius":0.04}},{"link":2,"link_name":"l2","geometry":{"type":"box","center":[0.0,0.5,0.0],"half_extents":[0.1,0.2,0.3],"rotation":[0.0,0.0,0.0,1.0]}}]"#
+    );
+
+    let urdf = r#"<robot name="prims">
+      <link name="base"><collision><origin xyz="0 0 0.05" rpy="0.1 0.2 0.3"/><geometry><sphere radius="0.1"/></geometry></collision></link>
+      <link name="a"><collision><origin xyz="0 0.1 0.25" rpy="0.5 0 0"/><geometry><cylinder radius="0.05" length="0.5"/></geometry></collision>
+        <collision><origin xyz="0.2 0 0.1" rpy="0 0.7 -0.4"/><geometry><box size="0.1 0.2 0.3"/></geometry></collision></link>
+      <link name="b"/>
+      <joint name="j1" type="revolute"><parent link="base"/><child link="a"/><origin xyz="0 0 0.1"/>
+        <axis xyz="0 0 1"/><limit lower="-1" upper="1" velocity="2" effort="1"/></joint>
+      <joint name="j2" type="revolute"><parent link="a"/><child link="b"/><origin xyz="0 0 0.5" rpy="0 0.3 0"/>
+        <axis xyz="1 0 0"/><limit lower="-1" upper="1" velocity="2" effort="1"/></joint>
+    </robot>"#;
+    let robot = Robot::from_urdf_str(urdf, "base", "b").unwrap();
+    assert_eq!(
+        serde_json::to_string(robot.collision_shapes()).unwrap(),
+        r#"[{"link":0,"link_name":"base","geometry":{"type":"sphere","center":[0.0,0.0,0.05],"radius":0.1}},{"link":1,"link_name":"a","geometry":{"type":"capsule","a":[0.0,0.21985638465105076,0.03060435952740681],"b":[0.0,-0.019856384651050746,0.4693956404725932],"radius":0.05}},{"link":1,"link_name":"a","geometry":{"type":"box","center":[0.2,0.0,0.1],"half_extents":[0.05,0.1,0.15],"rotation":[0.06812327793826826,0.3360626807021292,-0.18662454822852997,0.920647799997774]}}]"#
+    );
+
+    let hex = |bytes: &[u8]| format!("{:x}", Sha256::digest(bytes));
+    let panda = serde_json::to_string(Robot::panda().unwrap().collision_shapes()).unwrap();
+    assert_eq!(
+        hex(panda.as_bytes()),
+        "7e6cf70c3d8b85040949da63b844266e752ec30edce7464d312300c49d695880"
+    );
+    let out = crate::common::cli::dpmp(&["robot", "shapes"]);
+    assert!(out.status.success());
+    assert_eq!(
+        hex(&out.stdout),
+        "95ec7738360eb6212920c1f53b1ca8eda77e79398b5a82e577fd2cda63e59d25"
+    );
+}

@@ -204,3 +204,117 @@ fn scene_files_load_and_errors_name_the_file() {
         .to_string()
         .contains("bad.json"));
 }
+
+/// The obstacle wire format, exactly: what `/v1/optimize`, `/v1/plan`,
+/// scene files and dataset records accept and write back, and the serde
+/// messages API users read for unknown fields, unknown types, short arrays
+/// and missing fields.
+#[test]
+fn wire_format_is_pinned() {
+    let file = parse(REQUEST_OBSTACLES).unwrap();
+    assert_eq!(
+        serde_json::to_string(&file).unwrap(),
+        r#"{"obstacles":[{"id":"berry-2","type":"sphere","center":[0.6,0.0,0.7],"radius":0.015},{"id":"stem-2","type":"capsule","a":[0.6,0.0,0.715],"b":[0.6,0.0,0.8],"radius":0.003},{"id":"tray","type":"box","center":[0.5,0.0,0.2],"half_extents":[0.1,0.2,0.05],"rotation":[0.0,0.0,0.0,1.0]},{"id":"leaf","type":"convex","points":[[0.5,0.1,0.6],[0.55,0.1,0.6],[0.5,0.15,0.6],[0.52,0.12,0.62]]},{"id":"post","type":"cylinder","a":[0.8,0.3,0.0],"b":[0.8,0.3,1.0],"radius":0.02},{"id":"berry-3","type":"berry","center":[0.65,0.1,0.7],"radius":0.014,"elongation":0.005,"stem_top":[0.65,0.1,0.78],"stem_radius":0.002},{"id":"plate","type":"box","center":[0.0,0.5,0.0],"half_extents":[0.1,0.1,0.01],"rotation":[0.0,0.0,0.0,1.0]}]}"#
+    );
+    let error = |text: &str| parse(text).unwrap_err().to_string();
+    assert_eq!(
+        error(
+            r#"{"obstacles": [{"id": "b", "type": "sphere", "center": [0,0,0], "radius": 0.1, "colour": 1}]}"#
+        ),
+        r#"obstacle "b": unknown field `colour`, expected `center` or `radius` at line 1 column 92"#
+    );
+    assert_eq!(
+        error(r#"{"obstacles": [{"id": "t", "type": "torus", "center": [0,0,0]}]}"#),
+        r#"obstacle "t": unknown variant `torus`, expected one of `sphere`, `capsule`, `cylinder`, `box`, `convex`, `berry` at line 1 column 63"#
+    );
+    assert_eq!(
+        error(r#"{"obstacles": [{"id": "s", "type": "sphere", "center": [0,0], "radius": 0.1}]}"#),
+        r#"obstacle "s": invalid length 2, expected an array of length 3 at line 1 column 77"#
+    );
+    assert_eq!(
+        error(r#"{"obstacles": [{"id": "s", "type": "capsule", "a": [0,0,0], "radius": 1}]}"#),
+        r#"obstacle "s": missing field `b` at line 1 column 73"#
+    );
+    assert_eq!(
+        error(
+            r#"{"obstacles": [{"id": "c", "type": "capsule", "a": [0,0,0], "b": [0,0,1], "radius": 1, "center": [0,0,0]}]}"#
+        ),
+        r#"obstacle "c": unknown field `center`, expected one of `a`, `b`, `radius` at line 1 column 106"#
+    );
+    assert_eq!(
+        error(
+            r#"{"obstacles": [{"id": "x", "type": "box", "center": [0,0,0], "half_extents": [1,1,1], "rotation": [0,0,1]}]}"#
+        ),
+        r#"obstacle "x": invalid length 3, expected an array of length 4 at line 1 column 107"#
+    );
+    assert_eq!(
+        error(r#"{"obstacles": [{"id": "x", "type": "box", "center": [0,0,0], "size": [1,1,1]}]}"#),
+        r#"obstacle "x": unknown field `size`, expected one of `center`, `half_extents`, `rotation` at line 1 column 78"#
+    );
+    assert_eq!(
+        error(r#"{"obstacles": [{"id": "x", "center": [0,0,0], "radius": 1}]}"#),
+        r#"obstacle "x": missing field `type` at line 1 column 59"#
+    );
+    let plate = &file.obstacles[6];
+    assert_eq!(
+        serde_json::to_string(plate).unwrap(),
+        r#"{"id":"plate","type":"box","center":[0.0,0.5,0.0],"half_extents":[0.1,0.1,0.01],"rotation":[0.0,0.0,0.0,1.0]}"#
+    );
+}
+
+/// Every validation error, field path and message exactly.
+#[test]
+fn validation_messages_are_pinned() {
+    let cases = [
+        r#"{"id": "s", "type": "sphere", "center": [0,0,0], "radius": 0}"#,
+        r#"{"id": "c", "type": "capsule", "a": [0,0,0], "b": [0,0,1], "radius": -1}"#,
+        r#"{"id": "y", "type": "cylinder", "a": [0,0,0], "b": [0,0,0], "radius": 1}"#,
+        r#"{"id": "y", "type": "cylinder", "a": [0,0,0], "b": [0,0,1], "radius": 0}"#,
+        r#"{"id": "x", "type": "box", "center": [0,0,0], "half_extents": [1,0,1]}"#,
+        r#"{"id": "x", "type": "box", "center": [0,0,0], "half_extents": [1,1,1], "rotation": [0,0,0,2]}"#,
+        r#"{"id": "v", "type": "convex", "points": [[0,0,0],[1,0,0],[0,1,0]]}"#,
+        r#"{"id": "v", "type": "convex", "points": [[0,0,0],[1,0,0],[0,1,0],[1,1,0]]}"#,
+        r#"{"id": "b", "type": "berry", "center": [0,0,0], "radius": 0, "stem_top": [0,0,1]}"#,
+        r#"{"id": "b", "type": "berry", "center": [0,0,0], "radius": 0.1, "elongation": -1, "stem_top": [0,0,1]}"#,
+        r#"{"id": "b", "type": "berry", "center": [0,0,0], "radius": 0.1, "stem_top": [0,0,1], "stem_radius": 0}"#,
+        r#"{"id": "b", "type": "berry", "center": [0,0,0], "radius": 0.1, "stem_top": [0,0,1], "stem_radius": 0.2}"#,
+        r#"{"id": "b", "type": "berry", "center": [0,0,0], "radius": 0.1, "stem_top": [0,0,0.05]}"#,
+    ];
+    let messages: Vec<String> = cases
+        .iter()
+        .map(|text| {
+            let o: Obstacle = serde_json::from_str(text).unwrap();
+            let e = Scene::new(vec![o]).unwrap_err();
+            format!("{} | {e}", e.field().unwrap_or(""))
+        })
+        .collect();
+    assert_eq!(
+        messages,
+        [
+            r#"obstacles[0].radius | invalid obstacles[0].radius: obstacle "s": must be a finite number > 0, got 0"#,
+            r#"obstacles[0].radius | invalid obstacles[0].radius: obstacle "c": must be a finite number > 0, got -1"#,
+            r#"obstacles[0].b | invalid obstacles[0].b: obstacle "y": must differ from a (zero-length cylinder)"#,
+            r#"obstacles[0].radius | invalid obstacles[0].radius: obstacle "y": must be a finite number > 0, got 0"#,
+            r#"obstacles[0].half_extents[1] | invalid obstacles[0].half_extents[1]: obstacle "x": must be a finite number > 0, got 0"#,
+            r#"obstacles[0].rotation | invalid obstacles[0].rotation: obstacle "x": must be a unit quaternion [x, y, z, w], norm is 2"#,
+            r#"obstacles[0].points | invalid obstacles[0].points: obstacle "v": a convex hull needs at least 4 points, got 3"#,
+            r#"obstacles[0].points | invalid obstacles[0].points: obstacle "v": the points are coplanar (the hull has no volume)"#,
+            r#"obstacles[0].radius | invalid obstacles[0].radius: obstacle "b": must be a finite number > 0, got 0"#,
+            r#"obstacles[0].elongation | invalid obstacles[0].elongation: obstacle "b": must be a finite number >= 0, got -1"#,
+            r#"obstacles[0].stem_radius | invalid obstacles[0].stem_radius: obstacle "b": must be a finite number > 0, got 0"#,
+            r#"obstacles[0].stem_radius | invalid obstacles[0].stem_radius: obstacle "b": must not exceed the radius 0.1, got 0.2"#,
+            r#"obstacles[0].stem_top | invalid obstacles[0].stem_top: obstacle "b": must lie outside the berry body"#,
+        ]
+    );
+    let nan = obstacle(
+        "v",
+        ObstacleShape::Convex {
+            points: vec![[0.0; 3], [1.0, 0.0, f64::NAN]],
+        },
+    );
+    let e = Scene::new(vec![nan]).unwrap_err();
+    assert_eq!(
+        format!("{} | {e}", e.field().unwrap_or("")),
+        r#"obstacles[0].points[1][2] | invalid obstacles[0].points[1][2]: obstacle "v": must be a finite number, got NaN"#
+    );
+}
