@@ -42,7 +42,7 @@
 use super::problem_file::{Expect, Meta, ProblemFile, CATEGORIES};
 use super::synth_target::{bench_generator, draw_target, SynthTarget};
 use super::witness::{find_witness, pin_start, reports, validated};
-use crate::geometry::random_unit;
+use crate::geometry::{random_unit, Capsule, Sphere};
 use crate::promp::{fit_weights, Basis, WeightDistribution};
 use crate::robot::Robot;
 use crate::scene::{Obstacle, ObstacleShape, Scene};
@@ -349,10 +349,10 @@ pub fn round_value(v: &Value) -> Value {
 fn sphere(id: String, c: Vector3<f64>, radius: f64) -> Obstacle {
     Obstacle {
         id,
-        shape: ObstacleShape::Sphere {
+        shape: ObstacleShape::Sphere(Sphere {
             center: c.into(),
             radius,
-        },
+        }),
     }
 }
 
@@ -392,11 +392,11 @@ fn on_path_berry(centre: Vector3<f64>, radius: f64) -> Vec<Obstacle> {
         sphere("bench-berry-on-path".into(), centre, radius),
         Obstacle {
             id: "bench-stem-on-path".into(),
-            shape: ObstacleShape::Capsule {
+            shape: ObstacleShape::Capsule(Capsule {
                 a: (centre + Vector3::z() * radius).into(),
                 b: top.into(),
                 radius: 0.002,
-            },
+            }),
         },
     ]
 }
@@ -549,7 +549,7 @@ fn start_in_collision(scene: &Scene, robot: &Robot, start: &[f64]) -> bool {
 /// spare, so every TCP position the goal allows lies 1 cm deep inside it.
 fn goal_ball_inside(scene: &Scene, goal: &Vector3<f64>) -> bool {
     scene.obstacles().iter().any(|o| match &o.shape {
-        ObstacleShape::Sphere { center, radius } => {
+        ObstacleShape::Sphere(Sphere { center, radius }) => {
             (Vector3::from(*center) - goal).norm() + GOAL_TOLERANCE_M + 0.01 <= *radius
         }
         _ => false,

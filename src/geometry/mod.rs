@@ -1,15 +1,19 @@
 //! Geometry shared by the robot and the scene, below both in the module
 //! graph (it depends on neither):
 //!
+//! - [`primitive`]: the sphere, capsule and oriented box of robot links and
+//!   obstacles (one serde type each, one wire format) and their maths;
 //! - [`quaternion`]: the project's `[x, y, z, w]` quaternion convention and
 //!   its conversions to and from nalgebra;
 //! - [`segment`]: closest points and distances between segments and points
 //!   (the kernel of capsule, hull and broad-phase distances);
 //! - [`random_unit`]: uniformly random directions.
 
+pub mod primitive;
 pub mod quaternion;
 pub mod segment;
 
+pub use primitive::{midpoint, Capsule, OrientedBox, Primitive, Sphere};
 pub use segment::{closest_segments, point_segment_distance, segment_distance};
 
 use nalgebra::Vector3;

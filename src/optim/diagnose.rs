@@ -105,10 +105,10 @@ impl Problem {
         let tcp = self.robot.tcp_pose(&home).translation.vector;
         let point = crate::scene::Obstacle {
             id: "tcp".into(),
-            shape: crate::scene::ObstacleShape::Sphere {
+            shape: crate::scene::ObstacleShape::Sphere(crate::geometry::Sphere {
                 center: tcp.into(),
                 radius: 1e-6,
-            },
+            }),
         };
         crate::scene::Scene::new(vec![point])
             .ok()

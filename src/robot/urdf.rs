@@ -291,6 +291,8 @@ fn collect_shapes(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::{OrientedBox, Primitive};
+    use crate::robot::ShapeGeometry;
 
     const TWO_LINK: &str = r#"<robot name="two">
       <link name="base"><collision><geometry><sphere radius="0.1"/></geometry></collision></link>
@@ -315,11 +317,11 @@ mod tests {
         assert_eq!(shapes.len(), 3);
         let side = shapes
             .iter()
-            .find(|s| matches!(s.geometry, super::super::ShapeGeometry::Box { .. }))
+            .find(|s| matches!(s.geometry, ShapeGeometry::Primitive(Primitive::Box(_))))
             .unwrap();
         assert_eq!(side.link_name, "a");
         match &side.geometry {
-            super::super::ShapeGeometry::Box { center, .. } => {
+            ShapeGeometry::Primitive(Primitive::Box(OrientedBox { center, .. })) => {
                 assert!((center[0] - 0.3).abs() < 1e-12)
             }
             _ => unreachable!(),

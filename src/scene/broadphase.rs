@@ -2,8 +2,7 @@
 //! two of them, a lower bound on the distance between what they bound; and
 //! the capsule around a shape ([`Core`]), whose gap is a tighter bound.
 
-use crate::geometry::{quaternion, segment_distance};
-use crate::robot::ShapeGeometry;
+use crate::geometry::{quaternion, segment_distance, Primitive};
 use nalgebra::{UnitQuaternion, Vector3};
 
 /// An axis-aligned box `[min, max]` in the base frame.
@@ -45,6 +44,20 @@ impl Bounds {
         Bounds {
             min: center - reach,
             max: center + reach,
+        }
+    }
+
+    /// The box around a primitive.
+    pub fn of_primitive(primitive: &Primitive) -> Bounds {
+        let v = Vector3::from;
+        match primitive {
+            Primitive::Sphere(s) => Bounds::ball(&v(s.center), s.radius),
+            Primitive::Capsule(c) => Bounds::capsule(&v(c.a), &v(c.b), c.radius),
+            Primitive::Box(b) => Bounds::oriented_box(
+                &v(b.center),
+                &v(b.half_extents),
+                &quaternion::from_xyzw(&b.rotation),
+            ),
         }
     }
 
@@ -111,57 +124,16 @@ impl Core {
         Core { a, b, radius }
     }
 
-    /// The core around a base-frame robot primitive.
-    pub fn of_geometry(geometry: &ShapeGeometry) -> Core {
-        match geometry {
-            ShapeGeometry::Capsule { a, b, radius } => {
-                Core::new(Vector3::from(*a), Vector3::from(*b), *radius)
-            }
-            ShapeGeometry::Sphere { center, radius } => {
-                Core::new(Vector3::from(*center), Vector3::from(*center), *radius)
-            }
-            ShapeGeometry::Box {
-                center,
-                half_extents,
-                ..
-            } => {
-                let c = Vector3::from(*center);
-                Core::new(c, c, Vector3::from(*half_extents).norm())
-            }
-            ShapeGeometry::Convex(hull) => {
-                let (a, b, r) = hull.bound();
-                Core::new(Vector3::from(a), Vector3::from(b), r)
-            }
-        }
+    /// The core around a primitive: its bounding capsule.
+    pub fn of_primitive(primitive: &Primitive) -> Core {
+        let (a, b, radius) = primitive.bounding_capsule();
+        Core::new(Vector3::from(a), Vector3::from(b), radius)
     }
 
     /// Lower bound on the distance between shapes inside `self` and `other`.
     #[inline]
     pub fn gap(&self, other: &Core) -> f64 {
         segment_distance(&self.a, &self.b, &other.a, &other.b) - self.radius - other.radius
-    }
-}
-
-/// Bounds of a robot primitive already expressed in the base frame.
-pub fn geometry_bounds(geometry: &ShapeGeometry) -> Bounds {
-    match geometry {
-        ShapeGeometry::Capsule { a, b, radius } => {
-            Bounds::capsule(&Vector3::from(*a), &Vector3::from(*b), *radius)
-        }
-        ShapeGeometry::Sphere { center, radius } => Bounds::ball(&Vector3::from(*center), *radius),
-        ShapeGeometry::Box {
-            center,
-            half_extents,
-            rotation,
-        } => Bounds::oriented_box(
-            &Vector3::from(*center),
-            &Vector3::from(*half_extents),
-            &quaternion::from_xyzw(rotation),
-        ),
-        ShapeGeometry::Convex(hull) => {
-            let (a, b, r) = hull.bound();
-            Bounds::capsule(&Vector3::from(a), &Vector3::from(b), r)
-        }
     }
 }
 

@@ -8,7 +8,7 @@
 //! pairs whose boxes are further apart than the current best (or the
 //! activation distance) never reach parry.
 
-use super::broadphase::{geometry_bounds, Bounds, Core};
+use super::broadphase::{Bounds, Core};
 use super::distance::{pair_contact, PairContact};
 use super::shape::{CompiledObstacle, RobotPart};
 use super::Scene;
@@ -94,13 +94,13 @@ fn place_shape(robot: &Robot, frames: &Frames, index: usize) -> PlacedShape {
                 part: RobotPart::placed(&s.geometry, pose),
             }
         }
-        other => {
-            let world = other.transformed(pose);
+        ShapeGeometry::Primitive(p) => {
+            let world = p.transformed(pose);
             PlacedShape {
                 index,
-                bounds: geometry_bounds(&world),
-                core: Core::of_geometry(&world),
-                part: RobotPart::new(&world),
+                bounds: Bounds::of_primitive(&world),
+                core: Core::of_primitive(&world),
+                part: RobotPart::primitive(&world),
             }
         }
     }

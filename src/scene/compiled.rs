@@ -3,10 +3,10 @@
 
 use super::broadphase::Bounds;
 use super::distance::{point_distance, point_signed_distance};
-use super::obstacle::{validate_obstacles, Obstacle, ObstacleShape};
+use super::obstacle::{validate_obstacles, Obstacle};
 use super::shape::{compile_obstacle, CompiledObstacle};
 use crate::{Error, Result};
-use nalgebra::{Point3, Vector3};
+use nalgebra::Point3;
 
 /// Validated obstacles compiled to parry shapes with a bounds broad phase.
 /// Immutable, `Send + Sync`, cheap to share.
@@ -118,25 +118,5 @@ impl Scene {
     /// Diagonal of the box around every obstacle (0 when empty).
     pub(crate) fn bounds_diameter(&self) -> f64 {
         self.bounds.map_or(0.0, |b| (b.max - b.min).norm())
-    }
-}
-
-impl ObstacleShape {
-    /// A representative point of the obstacle (its centre).
-    pub fn center(&self) -> [f64; 3] {
-        match self {
-            ObstacleShape::Sphere { center, .. }
-            | ObstacleShape::Box { center, .. }
-            | ObstacleShape::Berry { center, .. } => *center,
-            ObstacleShape::Capsule { a, b, .. } | ObstacleShape::Cylinder { a, b, .. } => {
-                ((Vector3::from(*a) + Vector3::from(*b)) * 0.5).into()
-            }
-            ObstacleShape::Convex { points } => {
-                let sum = points
-                    .iter()
-                    .fold(Vector3::zeros(), |s, p| s + Vector3::from(*p));
-                (sum / points.len().max(1) as f64).into()
-            }
-        }
     }
 }

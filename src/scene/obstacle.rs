@@ -12,7 +12,9 @@
 //!
 //! Unknown fields are rejected; a box `rotation` defaults to identity.
 
+use crate::geometry::{midpoint, Capsule, OrientedBox, Primitive, Sphere};
 use crate::{Error, Result};
+use nalgebra::Vector3;
 use serde::{Deserialize, Deserializer, Serialize};
 
 /// Quaternions whose norm is further than this from 1 are rejected (closer
@@ -35,21 +37,9 @@ pub struct Obstacle {
 #[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
 pub enum ObstacleShape {
     /// A ball.
-    Sphere {
-        /// Centre (m).
-        center: [f64; 3],
-        /// Radius (m, > 0).
-        radius: f64,
-    },
+    Sphere(Sphere),
     /// Points within `radius` of the segment `a`–`b`.
-    Capsule {
-        /// First end of the axis.
-        a: [f64; 3],
-        /// Second end of the axis.
-        b: [f64; 3],
-        /// Radius (m, > 0).
-        radius: f64,
-    },
+    Capsule(Capsule),
     /// A flat-ended cylinder between `a` and `b`.
     Cylinder {
         /// Centre of the first end face.
@@ -59,16 +49,8 @@ pub enum ObstacleShape {
         /// Radius (m, > 0).
         radius: f64,
     },
-    /// An oriented box.
-    Box {
-        /// Centre.
-        center: [f64; 3],
-        /// Half side lengths (all > 0).
-        half_extents: [f64; 3],
-        /// Orientation quaternion `[x, y, z, w]` (default identity).
-        #[serde(default = "identity_rotation")]
-        rotation: [f64; 4],
-    },
+    /// An oriented box (`rotation` defaults to identity).
+    Box(OrientedBox),
     /// The convex hull of at least 4 non-coplanar points.
     Convex {
         /// Hull points.
@@ -104,10 +86,6 @@ pub struct SceneFile {
     pub obstacles: Vec<Obstacle>,
 }
 
-fn identity_rotation() -> [f64; 4] {
-    crate::geometry::quaternion::IDENTITY_XYZW
-}
-
 fn default_stem_radius() -> f64 {
     0.002
 }
@@ -133,120 +111,189 @@ impl<'de> Deserialize<'de> for Obstacle {
     }
 }
 
+impl ObstacleShape {
+    /// The shared primitive, for a sphere, capsule or box.
+    pub fn primitive(&self) -> Option<Primitive> {
+        match self {
+            ObstacleShape::Sphere(s) => Some((*s).into()),
+            ObstacleShape::Capsule(c) => Some((*c).into()),
+            ObstacleShape::Box(b) => Some((*b).into()),
+            ObstacleShape::Cylinder { .. }
+            | ObstacleShape::Convex { .. }
+            | ObstacleShape::Berry { .. } => None,
+        }
+    }
+
+    /// A representative point of the obstacle (its centre).
+    pub fn center(&self) -> [f64; 3] {
+        match self {
+            ObstacleShape::Sphere(s) => s.center,
+            ObstacleShape::Box(b) => b.center,
+            ObstacleShape::Berry { center, .. } => *center,
+            ObstacleShape::Capsule(Capsule { a, b, .. }) | ObstacleShape::Cylinder { a, b, .. } => {
+                midpoint(a, b)
+            }
+            ObstacleShape::Convex { points } => {
+                let sum = points
+                    .iter()
+                    .fold(Vector3::zeros(), |s, p| s + Vector3::from(*p));
+                (sum / points.len().max(1) as f64).into()
+            }
+        }
+    }
+}
+
 impl Obstacle {
     /// Validate one obstacle; errors name `obstacles[index].<field>` and the id.
     pub fn validate(&self, index: usize) -> Result<()> {
-        let at = |field: &str| format!("obstacles[{index}].{field}");
-        let fail = |field: &str, msg: String| {
-            Error::invalid(at(field), format!("obstacle \"{}\": {msg}", self.id))
-        };
-        let finite = |field: &str, values: &[f64]| -> Result<()> {
-            match values.iter().position(|v| !v.is_finite()) {
-                None => Ok(()),
-                Some(i) => Err(fail(
-                    &format!("{field}[{i}]"),
-                    format!("must be a finite number, got {}", values[i]),
-                )),
-            }
-        };
-        let positive = |field: &str, v: f64| -> Result<()> {
-            if v.is_finite() && v > 0.0 {
-                Ok(())
-            } else {
-                Err(fail(field, format!("must be a finite number > 0, got {v}")))
-            }
+        let check = Check {
+            index,
+            id: &self.id,
         };
         match &self.shape {
-            ObstacleShape::Sphere { center, radius } => {
-                finite("center", center)?;
-                positive("radius", *radius)
-            }
-            ObstacleShape::Capsule { a, b, radius } => {
-                finite("a", a)?;
-                finite("b", b)?;
-                positive("radius", *radius)
-            }
-            ObstacleShape::Cylinder { a, b, radius } => {
-                finite("a", a)?;
-                finite("b", b)?;
-                positive("radius", *radius)?;
-                if distance(a, b) < 1e-9 {
-                    return Err(fail(
-                        "b",
-                        "must differ from a (zero-length cylinder)".into(),
-                    ));
-                }
-                Ok(())
-            }
-            ObstacleShape::Box {
-                center,
-                half_extents,
-                rotation,
-            } => {
-                finite("center", center)?;
-                for (i, h) in half_extents.iter().enumerate() {
-                    positive(&format!("half_extents[{i}]"), *h)?;
-                }
-                finite("rotation", rotation)?;
-                let norm = rotation.iter().map(|x| x * x).sum::<f64>().sqrt();
-                if (norm - 1.0).abs() > QUATERNION_NORM_TOLERANCE {
-                    return Err(fail(
-                        "rotation",
-                        format!("must be a unit quaternion [x, y, z, w], norm is {norm}"),
-                    ));
-                }
-                Ok(())
-            }
-            ObstacleShape::Convex { points } => {
-                for (i, p) in points.iter().enumerate() {
-                    finite(&format!("points[{i}]"), p)?;
-                }
-                if points.len() < 4 {
-                    return Err(fail(
-                        "points",
-                        format!(
-                            "a convex hull needs at least 4 points, got {}",
-                            points.len()
-                        ),
-                    ));
-                }
-                if hull_thickness(points) < 1e-6 {
-                    return Err(fail(
-                        "points",
-                        "the points are coplanar (the hull has no volume)".into(),
-                    ));
-                }
-                Ok(())
-            }
+            ObstacleShape::Sphere(s) => check.sphere(s),
+            ObstacleShape::Capsule(c) => check.capsule(c),
+            ObstacleShape::Cylinder { a, b, radius } => check.cylinder(a, b, *radius),
+            ObstacleShape::Box(b) => check.oriented_box(b),
+            ObstacleShape::Convex { points } => check.convex(points),
             ObstacleShape::Berry {
                 center,
                 radius,
                 elongation,
                 stem_top,
                 stem_radius,
-            } => {
-                finite("center", center)?;
-                positive("radius", *radius)?;
-                if !(elongation.is_finite() && *elongation >= 0.0) {
-                    return Err(fail(
-                        "elongation",
-                        format!("must be a finite number >= 0, got {elongation}"),
-                    ));
-                }
-                finite("stem_top", stem_top)?;
-                positive("stem_radius", *stem_radius)?;
-                if stem_radius > radius {
-                    return Err(fail(
-                        "stem_radius",
-                        format!("must not exceed the radius {radius}, got {stem_radius}"),
-                    ));
-                }
-                if distance(center, stem_top) <= radius + elongation {
-                    return Err(fail("stem_top", "must lie outside the berry body".into()));
-                }
-                Ok(())
-            }
+            } => check.berry(center, *radius, *elongation, stem_top, *stem_radius),
         }
+    }
+}
+
+/// The validation of obstacle `index` (named `id`): errors name the field
+/// `obstacles[index].<field>` and say `obstacle "<id>": <message>`.
+struct Check<'a> {
+    index: usize,
+    id: &'a str,
+}
+
+impl Check<'_> {
+    /// The error for `field`.
+    fn fail(&self, field: &str, msg: impl std::fmt::Display) -> Error {
+        Error::invalid(
+            format!("obstacles[{}].{field}", self.index),
+            format!("obstacle \"{}\": {msg}", self.id),
+        )
+    }
+
+    /// Every value finite; the first that is not is named `field[i]`.
+    fn finite(&self, field: &str, values: &[f64]) -> Result<()> {
+        match values.iter().position(|v| !v.is_finite()) {
+            None => Ok(()),
+            Some(i) => Err(self.fail(
+                &format!("{field}[{i}]"),
+                format!("must be a finite number, got {}", values[i]),
+            )),
+        }
+    }
+
+    /// A finite number > 0.
+    fn positive(&self, field: &str, v: f64) -> Result<()> {
+        if v.is_finite() && v > 0.0 {
+            Ok(())
+        } else {
+            Err(self.fail(field, format!("must be a finite number > 0, got {v}")))
+        }
+    }
+
+    /// Finite centre, radius > 0.
+    fn sphere(&self, s: &Sphere) -> Result<()> {
+        self.finite("center", &s.center)?;
+        self.positive("radius", s.radius)
+    }
+
+    /// Finite ends, radius > 0.
+    fn capsule(&self, c: &Capsule) -> Result<()> {
+        self.finite("a", &c.a)?;
+        self.finite("b", &c.b)?;
+        self.positive("radius", c.radius)
+    }
+
+    /// Finite, distinct end-face centres, radius > 0.
+    fn cylinder(&self, a: &[f64; 3], b: &[f64; 3], radius: f64) -> Result<()> {
+        self.finite("a", a)?;
+        self.finite("b", b)?;
+        self.positive("radius", radius)?;
+        if distance(a, b) < 1e-9 {
+            return Err(self.fail("b", "must differ from a (zero-length cylinder)"));
+        }
+        Ok(())
+    }
+
+    /// Finite centre, half extents > 0, a unit quaternion.
+    fn oriented_box(&self, b: &OrientedBox) -> Result<()> {
+        self.finite("center", &b.center)?;
+        for (i, h) in b.half_extents.iter().enumerate() {
+            self.positive(&format!("half_extents[{i}]"), *h)?;
+        }
+        self.finite("rotation", &b.rotation)?;
+        let norm = b.rotation.iter().map(|x| x * x).sum::<f64>().sqrt();
+        if (norm - 1.0).abs() > QUATERNION_NORM_TOLERANCE {
+            return Err(self.fail(
+                "rotation",
+                format!("must be a unit quaternion [x, y, z, w], norm is {norm}"),
+            ));
+        }
+        Ok(())
+    }
+
+    /// At least 4 finite, non-coplanar points.
+    fn convex(&self, points: &[[f64; 3]]) -> Result<()> {
+        for (i, p) in points.iter().enumerate() {
+            self.finite(&format!("points[{i}]"), p)?;
+        }
+        if points.len() < 4 {
+            return Err(self.fail(
+                "points",
+                format!(
+                    "a convex hull needs at least 4 points, got {}",
+                    points.len()
+                ),
+            ));
+        }
+        if hull_thickness(points) < 1e-6 {
+            return Err(self.fail("points", "the points are coplanar (the hull has no volume)"));
+        }
+        Ok(())
+    }
+
+    /// Finite centre and stem top outside the body; radius > 0, elongation
+    /// >= 0, 0 < stem radius <= radius.
+    fn berry(
+        &self,
+        center: &[f64; 3],
+        radius: f64,
+        elongation: f64,
+        stem_top: &[f64; 3],
+        stem_radius: f64,
+    ) -> Result<()> {
+        self.finite("center", center)?;
+        self.positive("radius", radius)?;
+        if !(elongation.is_finite() && elongation >= 0.0) {
+            return Err(self.fail(
+                "elongation",
+                format!("must be a finite number >= 0, got {elongation}"),
+            ));
+        }
+        self.finite("stem_top", stem_top)?;
+        self.positive("stem_radius", stem_radius)?;
+        if stem_radius > radius {
+            return Err(self.fail(
+                "stem_radius",
+                format!("must not exceed the radius {radius}, got {stem_radius}"),
+            ));
+        }
+        if distance(center, stem_top) <= radius + elongation {
+            return Err(self.fail("stem_top", "must lie outside the berry body"));
+        }
+        Ok(())
     }
 }
 
@@ -281,7 +328,6 @@ fn distance(a: &[f64; 3], b: &[f64; 3]) -> f64 {
 /// Largest distance of any point from the plane through three well-spread
 /// points (0 for coplanar or collinear sets).
 fn hull_thickness(points: &[[f64; 3]]) -> f64 {
-    use nalgebra::Vector3;
     let v: Vec<Vector3<f64>> = points.iter().map(|p| Vector3::from(*p)).collect();
     let p0 = v[0];
     let Some(p1) = v

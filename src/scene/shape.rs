@@ -6,11 +6,13 @@
 
 use super::broadphase::{Bounds, Core};
 use super::obstacle::ObstacleShape;
-use crate::geometry::quaternion;
+use crate::geometry::{quaternion, Capsule, Primitive, Sphere};
 use crate::robot::hull::ConvexHull;
 use crate::robot::ShapeGeometry;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
-use parry3d::shape::{Ball, Capsule, ConvexPolyhedron, Cuboid, Cylinder, SharedShape};
+use parry3d::shape::{
+    Ball, Capsule as ParryCapsule, ConvexPolyhedron, Cuboid, Cylinder, SharedShape,
+};
 
 /// One convex part of an obstacle: a parry shape in its own frame and that
 /// frame's pose in the base frame.
@@ -45,94 +47,103 @@ pub struct CompiledObstacle {
 /// Compile a validated obstacle; `None` only if parry rejects a hull that
 /// passed validation (reported by the caller).
 pub fn compile_obstacle(shape: &ObstacleShape) -> Option<CompiledObstacle> {
-    let v = |p: &[f64; 3]| Vector3::from(*p);
     match shape {
-        ObstacleShape::Sphere { center, radius } => Some(single(
-            ball_part(&v(center), *radius),
-            Bounds::ball(&v(center), *radius),
-        )),
-        ObstacleShape::Capsule { a, b, radius } => Some(single(
-            capsule_part(&v(a), &v(b), *radius),
-            Bounds::capsule(&v(a), &v(b), *radius),
-        )),
-        ObstacleShape::Cylinder { a, b, radius } => {
-            let (a, b) = (v(a), v(b));
-            let axis = b - a;
-            let rotation =
-                UnitQuaternion::rotation_between(&Vector3::y(), &axis).unwrap_or_else(|| {
-                    UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
-                });
-            let pose = Isometry3::from_parts(Translation3::from((a + b) * 0.5), rotation);
-            let shape = SharedShape::new(Cylinder::new(0.5 * axis.norm() as f32, *radius as f32));
-            // Bounds of a cylinder: the capsule bounds contain it.
-            let core = Core::new(a, b, *radius);
-            Some(single(
-                Part { shape, pose, core },
-                Bounds::capsule(&a, &b, *radius),
-            ))
-        }
-        ObstacleShape::Box {
-            center,
-            half_extents,
-            rotation,
-        } => {
-            let rotation = quaternion::from_xyzw(rotation);
-            let h = v(half_extents);
-            let pose = Isometry3::from_parts(Translation3::from(v(center)), rotation);
-            let shape = SharedShape::new(Cuboid::new(to_glam(&h)));
-            let core = Core::new(v(center), v(center), h.norm());
-            Some(single(
-                Part { shape, pose, core },
-                Bounds::oriented_box(&v(center), &h, &rotation),
-            ))
-        }
-        ObstacleShape::Convex { points } => {
-            let pts: Vec<Vector3<f64>> = points.iter().map(v).collect();
-            let centre = pts.iter().sum::<Vector3<f64>>() / pts.len() as f64;
-            let local: Vec<parry3d::math::Vector> =
-                pts.iter().map(|p| to_glam(&(p - centre))).collect();
-            let hull = ConvexPolyhedron::from_convex_hull(&local)?;
-            let pose =
-                Isometry3::from_parts(Translation3::from(centre), UnitQuaternion::identity());
-            let reach = pts.iter().map(|p| (p - centre).norm()).fold(0.0, f64::max);
-            let core = Core::new(centre, centre, reach);
-            Some(single(
-                Part {
-                    shape: SharedShape::new(hull),
-                    pose,
-                    core,
-                },
-                Bounds::points(&pts),
-            ))
-        }
+        ObstacleShape::Sphere(s) => Some(primitive_obstacle(&(*s).into())),
+        ObstacleShape::Capsule(c) => Some(primitive_obstacle(&(*c).into())),
+        ObstacleShape::Box(b) => Some(primitive_obstacle(&(*b).into())),
+        ObstacleShape::Cylinder { a, b, radius } => Some(cylinder_obstacle(a, b, *radius)),
+        ObstacleShape::Convex { points } => convex_obstacle(points),
         ObstacleShape::Berry {
             center,
             radius,
             elongation,
             stem_top,
             stem_radius,
-        } => {
-            let (c, top) = (v(center), v(stem_top));
-            let up = (top - c).normalize();
-            let body = if *elongation > 0.0 {
-                let (lo, hi) = (c - up * *elongation, c + up * *elongation);
-                (
-                    capsule_part(&lo, &hi, *radius),
-                    Bounds::capsule(&lo, &hi, *radius),
-                )
-            } else {
-                (ball_part(&c, *radius), Bounds::ball(&c, *radius))
-            };
-            let stem_base = c + up * (*elongation + *radius - *stem_radius).max(0.0);
-            let stem = (
-                capsule_part(&stem_base, &top, *stem_radius),
-                Bounds::capsule(&stem_base, &top, *stem_radius),
-            );
-            Some(CompiledObstacle {
-                bounds: body.1.merged(&stem.1),
-                parts: vec![body.0, stem.0],
-            })
+        } => Some(berry_obstacle(
+            center,
+            *radius,
+            *elongation,
+            stem_top,
+            *stem_radius,
+        )),
+    }
+}
+
+/// A sphere, capsule or box obstacle: one part.
+fn primitive_obstacle(primitive: &Primitive) -> CompiledObstacle {
+    single(primitive_part(primitive), Bounds::of_primitive(primitive))
+}
+
+/// A flat-ended cylinder between the end-face centres `a` and `b`: parry's
+/// cylinder (about its y axis) turned onto the axis; the capsule with the
+/// same axis bounds it.
+fn cylinder_obstacle(a: &[f64; 3], b: &[f64; 3], radius: f64) -> CompiledObstacle {
+    let (a, b) = (Vector3::from(*a), Vector3::from(*b));
+    let axis = b - a;
+    let rotation = UnitQuaternion::rotation_between(&Vector3::y(), &axis).unwrap_or_else(|| {
+        UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
+    });
+    let pose = Isometry3::from_parts(Translation3::from((a + b) * 0.5), rotation);
+    let shape = SharedShape::new(Cylinder::new(0.5 * axis.norm() as f32, radius as f32));
+    let core = Core::new(a, b, radius);
+    single(Part { shape, pose, core }, Bounds::capsule(&a, &b, radius))
+}
+
+/// The convex hull of `points`, about their mean; `None` if parry cannot
+/// build it.
+fn convex_obstacle(points: &[[f64; 3]]) -> Option<CompiledObstacle> {
+    let pts: Vec<Vector3<f64>> = points.iter().map(|p| Vector3::from(*p)).collect();
+    let centre = pts.iter().sum::<Vector3<f64>>() / pts.len() as f64;
+    let local: Vec<parry3d::math::Vector> = pts.iter().map(|p| to_glam(&(p - centre))).collect();
+    let hull = ConvexPolyhedron::from_convex_hull(&local)?;
+    let pose = Isometry3::from_parts(Translation3::from(centre), UnitQuaternion::identity());
+    let reach = pts.iter().map(|p| (p - centre).norm()).fold(0.0, f64::max);
+    let core = Core::new(centre, centre, reach);
+    Some(single(
+        Part {
+            shape: SharedShape::new(hull),
+            pose,
+            core,
+        },
+        Bounds::points(&pts),
+    ))
+}
+
+/// A berry: its body (a ball, or a capsule along the stem axis when
+/// elongated) and its stem capsule, from the top of the body to `stem_top`.
+fn berry_obstacle(
+    center: &[f64; 3],
+    radius: f64,
+    elongation: f64,
+    stem_top: &[f64; 3],
+    stem_radius: f64,
+) -> CompiledObstacle {
+    let (c, top) = (Vector3::from(*center), Vector3::from(*stem_top));
+    let up = (top - c).normalize();
+    let body: Primitive = if elongation > 0.0 {
+        Capsule {
+            a: (c - up * elongation).into(),
+            b: (c + up * elongation).into(),
+            radius,
         }
+        .into()
+    } else {
+        Sphere {
+            center: *center,
+            radius,
+        }
+        .into()
+    };
+    let stem_base = c + up * (elongation + radius - stem_radius).max(0.0);
+    let stem: Primitive = Capsule {
+        a: stem_base.into(),
+        b: *stem_top,
+        radius: stem_radius,
+    }
+    .into();
+    CompiledObstacle {
+        bounds: Bounds::of_primitive(&body).merged(&Bounds::of_primitive(&stem)),
+        parts: vec![primitive_part(&body), primitive_part(&stem)],
     }
 }
 
@@ -143,92 +154,110 @@ fn single(part: Part, bounds: Bounds) -> CompiledObstacle {
     }
 }
 
-fn ball_part(center: &Vector3<f64>, radius: f64) -> Part {
+/// A primitive as an obstacle part (base frame).
+fn primitive_part(primitive: &Primitive) -> Part {
+    let (shape, pose) = local_primitive(primitive);
     Part {
-        shape: SharedShape::new(Ball::new(radius as f32)),
-        pose: Isometry3::translation(center.x, center.y, center.z),
-        core: Core::new(*center, *center, radius),
+        shape: shape.shared(),
+        pose,
+        core: Core::of_primitive(primitive),
     }
 }
 
-/// A capsule part centred at the segment midpoint (small local coordinates).
-fn capsule_part(a: &Vector3<f64>, b: &Vector3<f64>, radius: f64) -> Part {
-    let mid = (a + b) * 0.5;
-    Part {
-        shape: SharedShape::new(Capsule::new(
-            to_glam(&(a - mid)),
-            to_glam(&(b - mid)),
-            radius as f32,
-        )),
-        pose: Isometry3::translation(mid.x, mid.y, mid.z),
-        core: Core::new(*a, *b, radius),
+/// A primitive as a parry shape about a local origin near it (parry works
+/// in `f32`), without allocating.
+pub enum LocalShape {
+    /// Ball centred at the origin.
+    Ball(Ball),
+    /// Capsule whose segment's midpoint is the origin.
+    Capsule(ParryCapsule),
+    /// Box centred at the origin, along the frame axes.
+    Cuboid(Cuboid),
+}
+
+impl LocalShape {
+    /// The parry shape.
+    pub fn shape(&self) -> &dyn parry3d::shape::Shape {
+        match self {
+            LocalShape::Ball(s) => s,
+            LocalShape::Capsule(s) => s,
+            LocalShape::Cuboid(s) => s,
+        }
+    }
+
+    /// The shape behind a shared pointer (for compiled obstacles).
+    fn shared(self) -> SharedShape {
+        match self {
+            LocalShape::Ball(s) => SharedShape::new(s),
+            LocalShape::Capsule(s) => SharedShape::new(s),
+            LocalShape::Cuboid(s) => SharedShape::new(s),
+        }
     }
 }
 
-/// A robot primitive (already in the base frame) as a parry shape in a local
-/// frame plus that frame's pose.
+/// A primitive as a parry shape in a local frame, and that frame's pose in
+/// the primitive's frame: the ball's centre, the capsule's midpoint, the
+/// box's centre and rotation.
+pub fn local_primitive(primitive: &Primitive) -> (LocalShape, Isometry3<f64>) {
+    match primitive {
+        Primitive::Sphere(s) => (
+            LocalShape::Ball(Ball::new(s.radius as f32)),
+            Isometry3::translation(s.center[0], s.center[1], s.center[2]),
+        ),
+        Primitive::Capsule(c) => {
+            let (a, b) = (Vector3::from(c.a), Vector3::from(c.b));
+            let mid = (a + b) * 0.5;
+            (
+                LocalShape::Capsule(ParryCapsule::new(
+                    to_glam(&(a - mid)),
+                    to_glam(&(b - mid)),
+                    c.radius as f32,
+                )),
+                Isometry3::translation(mid.x, mid.y, mid.z),
+            )
+        }
+        Primitive::Box(b) => (
+            LocalShape::Cuboid(Cuboid::new(to_glam(&Vector3::from(b.half_extents)))),
+            Isometry3::from_parts(
+                Translation3::from(Vector3::from(b.center)),
+                quaternion::from_xyzw(&b.rotation),
+            ),
+        ),
+    }
+}
+
+/// A robot shape in the base frame as a parry shape in a local frame plus
+/// that frame's pose.
 pub enum RobotPart {
-    /// Ball centred at the pose origin.
-    Ball(Ball, Isometry3<f64>),
-    /// Capsule about the pose origin.
-    Capsule(Capsule, Isometry3<f64>),
-    /// Box about the pose origin.
-    Cuboid(Cuboid, Isometry3<f64>),
+    /// A primitive ([`local_primitive`]) and its local frame's pose.
+    Primitive(LocalShape, Isometry3<f64>),
     /// A mesh link's convex hull (shared), the link's pose, and the pose of
     /// the hull's parry shape ([`crate::robot::hull`]).
     Convex(ConvexHull, Isometry3<f64>, Isometry3<f64>),
 }
 
 impl RobotPart {
-    /// Build from a link-frame primitive and the link's pose; a hull keeps
-    /// its shared parry shape and only composes the pose.
+    /// Build from a link-frame shape and the link's pose; a hull keeps its
+    /// shared parry shape and only composes the pose.
     pub fn placed(geometry: &ShapeGeometry, link_pose: &Isometry3<f64>) -> RobotPart {
         match geometry {
             ShapeGeometry::Convex(hull) => {
                 RobotPart::Convex(hull.clone(), *link_pose, link_pose * hull.frame())
             }
-            other => RobotPart::new(&other.transformed(link_pose)),
+            ShapeGeometry::Primitive(p) => RobotPart::primitive(&p.transformed(link_pose)),
         }
     }
 
     /// Build from a base-frame primitive.
-    pub fn new(geometry: &ShapeGeometry) -> RobotPart {
-        match geometry {
-            ShapeGeometry::Convex(hull) => {
-                RobotPart::Convex(hull.clone(), Isometry3::identity(), *hull.frame())
-            }
-            ShapeGeometry::Sphere { center, radius } => RobotPart::Ball(
-                Ball::new(*radius as f32),
-                Isometry3::translation(center[0], center[1], center[2]),
-            ),
-            ShapeGeometry::Capsule { a, b, radius } => {
-                let (a, b) = (Vector3::from(*a), Vector3::from(*b));
-                let mid = (a + b) * 0.5;
-                RobotPart::Capsule(
-                    Capsule::new(to_glam(&(a - mid)), to_glam(&(b - mid)), *radius as f32),
-                    Isometry3::translation(mid.x, mid.y, mid.z),
-                )
-            }
-            ShapeGeometry::Box {
-                center,
-                half_extents,
-                rotation,
-            } => RobotPart::Cuboid(
-                Cuboid::new(to_glam(&Vector3::from(*half_extents))),
-                Isometry3::from_parts(
-                    Translation3::from(Vector3::from(*center)),
-                    quaternion::from_xyzw(rotation),
-                ),
-            ),
-        }
+    pub fn primitive(primitive: &Primitive) -> RobotPart {
+        let (shape, pose) = local_primitive(primitive);
+        RobotPart::Primitive(shape, pose)
     }
 
     /// The parry shape and its pose.
     pub fn shape_and_pose(&self) -> (&dyn parry3d::shape::Shape, &Isometry3<f64>) {
         match self {
-            RobotPart::Ball(s, p) => (s, p),
-            RobotPart::Capsule(s, p) => (s, p),
-            RobotPart::Cuboid(s, p) => (s, p),
+            RobotPart::Primitive(s, p) => (s.shape(), p),
             RobotPart::Convex(hull, _, p) => (hull.shape().as_ref(), p),
         }
     }
@@ -238,7 +267,7 @@ impl RobotPart {
     pub fn allowance(&self) -> f64 {
         match self {
             RobotPart::Convex(hull, _, _) => hull.allowance(),
-            _ => 0.0,
+            RobotPart::Primitive(..) => 0.0,
         }
     }
 }

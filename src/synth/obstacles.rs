@@ -7,6 +7,7 @@
 //! berry axis; stems, peduncles and petioles are capsules, leaflets thin
 //! convex slabs, the tray a box.
 
+use crate::geometry::{Capsule, OrientedBox};
 use crate::scene::{Obstacle, ObstacleShape, SceneFile};
 use crate::synth::plant::{Berry, Plant};
 
@@ -57,11 +58,11 @@ pub fn plant_obstacles(plant: &Plant) -> Vec<Obstacle> {
         .map(|(i, b)| berry_obstacle(b, calyx_stem_radius(plant, i, b)));
     let stems = plant.stems.iter().map(|s| Obstacle {
         id: s.id.clone(),
-        shape: ObstacleShape::Capsule {
+        shape: ObstacleShape::Capsule(Capsule {
             a: arr(&s.a),
             b: arr(&s.b),
             radius: s.radius,
-        },
+        }),
     });
     let leaves = plant.leaflets.iter().map(|l| Obstacle {
         id: l.id.clone(),
@@ -71,11 +72,11 @@ pub fn plant_obstacles(plant: &Plant) -> Vec<Obstacle> {
     });
     let tray = plant.tray.iter().map(|t| Obstacle {
         id: "tray".to_string(),
-        shape: ObstacleShape::Box {
+        shape: ObstacleShape::Box(OrientedBox {
             center: arr(&t.center),
             half_extents: [t.half_extents.x, t.half_extents.y, t.half_extents.z],
             rotation: crate::geometry::quaternion::IDENTITY_XYZW,
-        },
+        }),
     });
     berries.chain(stems).chain(leaves).chain(tray).collect()
 }
@@ -132,9 +133,9 @@ mod tests {
             .iter()
             .map(|o| match o.shape {
                 ObstacleShape::Berry { .. } => "berry",
-                ObstacleShape::Capsule { .. } => "capsule",
+                ObstacleShape::Capsule(_) => "capsule",
                 ObstacleShape::Convex { .. } => "convex",
-                ObstacleShape::Box { .. } => "box",
+                ObstacleShape::Box(_) => "box",
                 _ => "other",
             })
             .collect();

@@ -6,6 +6,7 @@
 
 use crate::common::scene::sphere;
 use dpmp::fixtures::{typical_request, ExampleSettings};
+use dpmp::geometry::{OrientedBox, Primitive};
 use dpmp::optim::continuous::displacement_bound;
 use dpmp::optim::{optimize, OptimizeRequest, PriorSpec, Status};
 use dpmp::promp::{Basis, PrompConfig};
@@ -28,7 +29,9 @@ fn robot_points(robot: &Robot, q: &[f64]) -> Vec<Vector3<f64>> {
                     .iter()
                     .map(|v| (pose * Point3::from(*v)).coords),
             ),
-            ShapeGeometry::Box { center, .. } => out.push((pose * Point3::from(*center)).coords),
+            ShapeGeometry::Primitive(Primitive::Box(OrientedBox { center, .. })) => {
+                out.push((pose * Point3::from(*center)).coords)
+            }
             _ => {}
         }
     }

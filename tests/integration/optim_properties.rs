@@ -67,11 +67,11 @@ proptest! {
         let goal = req.goal.as_ref().unwrap().position;
         req.obstacles.push(dpmp::scene::Obstacle {
             id: "wall".into(),
-            shape: dpmp::scene::ObstacleShape::Box {
+            shape: dpmp::scene::ObstacleShape::Box(dpmp::geometry::OrientedBox {
                 center: [goal[0] - 0.08, 0.0, 0.5],
                 half_extents: [0.01, 2.0, 2.0],
                 rotation: [0.0, 0.0, 0.0, 1.0],
-            },
+            }),
         });
         let resp = optimize(&req, &robot).unwrap();
         prop_assert_ne!(resp.status, Status::Optimal);

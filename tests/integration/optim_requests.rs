@@ -5,6 +5,7 @@
 use crate::common::requests::typical;
 use crate::common::scene::sphere;
 use dpmp::fixtures::ExampleSettings;
+use dpmp::geometry::Sphere;
 use dpmp::optim::{
     optimize, optimize_with, OptimizeRequest, OptimizeResponse, PriorSpec, SolveControl, Status,
 };
@@ -95,7 +96,7 @@ fn bad_input_names_the_field() {
     r.options.activation_distance_m = Some(0.001);
     assert_eq!(field_of(&r, &robot), "options.activation_distance_m");
     let mut r = base.clone();
-    if let ObstacleShape::Sphere { radius, .. } = &mut r.obstacles[0].shape {
+    if let ObstacleShape::Sphere(Sphere { radius, .. }) = &mut r.obstacles[0].shape {
         *radius = -1.0;
     }
     assert!(
@@ -164,7 +165,7 @@ fn infeasible_cases_are_diagnosed_with_the_constraint() {
     );
     // A berry just around the goal point is not a proof of infeasibility
     // (the TCP is not a collision shape): never `optimal` with a violation.
-    if let ObstacleShape::Sphere { radius, .. } = &mut r.obstacles[0].shape {
+    if let ObstacleShape::Sphere(Sphere { radius, .. }) = &mut r.obstacles[0].shape {
         *radius = 0.02;
     }
     let resp = optimize(&r, &robot).unwrap();

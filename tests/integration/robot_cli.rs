@@ -135,36 +135,37 @@ fn ik_and_shapes_print_json() {
 /// origins, and the shipped Panda's shapes and CLI output by hash.
 #[test]
 fn robot_shapes_json_is_pinned() {
-    use dpmp::robot::{LinkShape, Robot, ShapeGeometry};
+    use dpmp::geometry::{Capsule, OrientedBox, Primitive, Sphere};
+    use dpmp::robot::{LinkShape, Robot};
     use sha2::{Digest, Sha256};
-    let shape = |link: usize, geometry: ShapeGeometry| LinkShape {
+    let shape = |link: usize, geometry: Primitive| LinkShape {
         link,
         link_name: format!("l{link}"),
-        geometry,
+        geometry: geometry.into(),
     };
     let shapes = [
         shape(
             0,
-            ShapeGeometry::Capsule {
+            Primitive::Capsule(Capsule {
                 a: [0.0, 0.0, -0.1],
                 b: [0.0, 0.0, 0.1],
                 radius: 0.05,
-            },
+            }),
         ),
         shape(
             1,
-            ShapeGeometry::Sphere {
+            Primitive::Sphere(Sphere {
                 center: [0.1, 0.2, 0.3],
                 radius: 0.04,
-            },
+            }),
         ),
         shape(
             2,
-            ShapeGeometry::Box {
+            Primitive::Box(OrientedBox {
                 center: [0.0, 0.5, 0.0],
                 half_extents: [0.1, 0.2, 0.3],
                 rotation: [0.0, 0.0, 0.0, 1.0],
-            },
+            }),
         ),
     ];
     assert_eq!(

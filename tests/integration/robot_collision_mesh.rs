@@ -7,6 +7,7 @@
 
 use crate::common::robot::mesh_hulls;
 use crate::common::scene::sphere;
+use dpmp::geometry::{Capsule, OrientedBox, Sphere};
 use dpmp::robot::hull::{tightness, ROUNDING_ALLOWANCE_M};
 use dpmp::robot::hull_query::segment_triangle_distance;
 use dpmp::robot::mesh::TriangleMesh;
@@ -110,29 +111,29 @@ fn obstacle_off(p: &Vector3<f64>, n: &Vector3<f64>, offset: f64, kind: usize) ->
         0 => {
             let r = 0.012;
             let c = p + n * (offset + r);
-            ObstacleShape::Sphere {
+            ObstacleShape::Sphere(Sphere {
                 center: c.into(),
                 radius: r,
-            }
+            })
         }
         1 => {
             let r = 0.004;
             let c = p + n * (offset + r);
             let along = n.cross(&Vector3::new(0.3, -0.5, 0.8)).normalize() * 0.03;
-            ObstacleShape::Capsule {
+            ObstacleShape::Capsule(Capsule {
                 a: (c - along).into(),
                 b: (c + along).into(),
                 radius: r,
-            }
+            })
         }
         _ => {
             let h = 0.01;
             let c = p + n * (offset + h);
-            ObstacleShape::Box {
+            ObstacleShape::Box(OrientedBox {
                 center: c.into(),
                 half_extents: [h, h, h],
                 rotation: [0.0, 0.0, 0.0, 1.0],
-            }
+            })
         }
     }
 }
@@ -143,10 +144,10 @@ fn obstacle_off(p: &Vector3<f64>, n: &Vector3<f64>, offset: f64, kind: usize) ->
 /// f64 segment-triangle distances for capsules, triangle-triangle for boxes.
 fn mesh_distance(mesh: &TriangleMesh, pose: &Isometry3<f64>, shape: &ObstacleShape) -> f64 {
     let world = mesh.mapped(|v| (pose * Point3::from(*v)).coords.into());
-    if let ObstacleShape::Sphere { center, radius } = shape {
+    if let ObstacleShape::Sphere(Sphere { center, radius }) = shape {
         return world.distance_to_point(center) - radius;
     }
-    if let ObstacleShape::Capsule { a, b, radius } = shape {
+    if let ObstacleShape::Capsule(Capsule { a, b, radius }) = shape {
         let (a, b) = (Vector3::from(*a), Vector3::from(*b));
         return world
             .triangles
@@ -162,11 +163,11 @@ fn mesh_distance(mesh: &TriangleMesh, pose: &Isometry3<f64>, shape: &ObstacleSha
             .fold(f64::INFINITY, f64::min)
             - radius;
     }
-    let ObstacleShape::Box {
+    let ObstacleShape::Box(OrientedBox {
         center,
         half_extents: h,
         ..
-    } = shape
+    }) = shape
     else {
         unreachable!()
     };
@@ -282,7 +283,7 @@ fn reported_clearance_never_exceeds_the_exact_mesh_distance() {
                 mesh_distance(h.source().unwrap(), &frames.poses[*l], &shape)
             };
             worst_over = worst_over.max(r - exact);
-            let is_box = matches!(shape, ObstacleShape::Box { .. });
+            let is_box = matches!(shape, ObstacleShape::Box(_));
             if exact > 0.0 && is_box {
                 worst_box = worst_box.max(exact - r);
             } else if exact > 0.0 {

@@ -4,7 +4,8 @@
 
 use crate::common::robot::{at_fractions, panda};
 use crate::common::scene::sphere;
-use dpmp::robot::{Robot, ShapeGeometry, PANDA_HOME};
+use dpmp::geometry::{Capsule, OrientedBox, Primitive};
+use dpmp::robot::{Robot, PANDA_HOME};
 use dpmp::scene::{Obstacle, ObstacleShape, Scene};
 use nalgebra::{Point3, Vector3};
 use proptest::prelude::*;
@@ -173,11 +174,11 @@ fn clearance_gradient_matches_finite_differences() {
         vec![sphere("side", side.coords.into(), 0.03)],
         vec![Obstacle {
             id: "box".into(),
-            shape: ObstacleShape::Box {
+            shape: ObstacleShape::Box(OrientedBox {
                 center: (tcp * Point3::new(0.05, 0.1, 0.05)).coords.into(),
                 half_extents: [0.03, 0.02, 0.04],
                 rotation: [0.1, 0.2, 0.3, 0.927_361_849_549_570_4],
-            },
+            }),
         }],
     ];
     let h = 1e-4;
@@ -263,11 +264,11 @@ fn berries_are_a_body_plus_a_stem() {
     let scene = Scene::new(vec![berry]).unwrap();
     let c = scene.min_clearance(&robot, &frames).unwrap();
     // closed form: every primitive against the body capsule and the stem capsule
-    let body = ShapeGeometry::Capsule {
+    let body = Primitive::Capsule(Capsule {
         a: (center - Vector3::new(0.0, 0.0, 0.005)).coords.into(),
         b: (center + Vector3::new(0.0, 0.0, 0.005)).coords.into(),
         radius: 0.015,
-    };
+    });
     let expect = scene
         .clearances_within(&robot, &frames, 10.0)
         .iter()
@@ -276,11 +277,11 @@ fn berries_are_a_body_plus_a_stem() {
     assert!((c.distance - expect).abs() < 1e-9);
     // the robot witness point lies on a primitive, the obstacle one on the berry
     let on_body = body.signed_distance(&c.point_obstacle);
-    let stem = ShapeGeometry::Capsule {
+    let stem = Primitive::Capsule(Capsule {
         a: (center + Vector3::new(0.0, 0.0, 0.018)).coords.into(),
         b: (center + Vector3::new(0.0, 0.0, 0.08)).coords.into(),
         radius: 0.002,
-    };
+    });
     let on_stem = stem.signed_distance(&c.point_obstacle);
     assert!(
         on_body.abs() < 1e-4 || on_stem.abs() < 1e-4,
@@ -321,11 +322,11 @@ fn cylinders_convex_hulls_and_empty_scenes() {
     };
     let capsule = Obstacle {
         id: "post".into(),
-        shape: ObstacleShape::Capsule {
+        shape: ObstacleShape::Capsule(Capsule {
             a: [tcp.x + 0.3, tcp.y, 0.0],
             b: [tcp.x + 0.3, tcp.y, 1.2],
             radius: 0.02,
-        },
+        }),
     };
     let d_cyl = Scene::new(vec![post])
         .unwrap()

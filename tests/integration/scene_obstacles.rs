@@ -2,6 +2,7 @@
 //! field and the obstacle id.
 
 use crate::common::scene::{obstacle, sphere};
+use dpmp::geometry::{OrientedBox, Sphere};
 use dpmp::scene::{Obstacle, ObstacleShape, Scene, SceneFile};
 
 const REQUEST_OBSTACLES: &str = r#"{"obstacles": [
@@ -27,13 +28,15 @@ fn the_request_examples_parse_and_round_trip() {
     assert_eq!(file.obstacles[0].id, "berry-2");
     assert_eq!(
         file.obstacles[0].shape,
-        ObstacleShape::Sphere {
+        ObstacleShape::Sphere(Sphere {
             center: [0.6, 0.0, 0.7],
             radius: 0.015
-        }
+        })
     );
     match &file.obstacles[6].shape {
-        ObstacleShape::Box { rotation, .. } => assert_eq!(*rotation, [0.0, 0.0, 0.0, 1.0]),
+        ObstacleShape::Box(OrientedBox { rotation, .. }) => {
+            assert_eq!(*rotation, [0.0, 0.0, 0.0, 1.0])
+        }
         other => panic!("{other:?}"),
     }
     match &file.obstacles[5].shape {
@@ -93,7 +96,7 @@ fn bad_obstacles_name_the_field_and_the_id() {
     assert!(msg.contains("berry-2"), "{msg}");
 
     let mut nan = sphere("n", CENTRE, 0.1);
-    if let ObstacleShape::Sphere { center, .. } = &mut nan.shape {
+    if let ObstacleShape::Sphere(Sphere { center, .. }) = &mut nan.shape {
         center[1] = f64::NAN;
     }
     assert_eq!(error_of(vec![nan]).0, "obstacles[0].center[1]");
@@ -108,11 +111,11 @@ fn bad_obstacles_name_the_field_and_the_id() {
 
     let flat_box = obstacle(
         "tray",
-        ObstacleShape::Box {
+        ObstacleShape::Box(OrientedBox {
             center: [0.0; 3],
             half_extents: [0.1, 0.0, 0.1],
             rotation: [0.0, 0.0, 0.0, 1.0],
-        },
+        }),
     );
     let (field, msg) = error_of(vec![flat_box]);
     assert_eq!(field, "obstacles[0].half_extents[1]");
@@ -120,11 +123,11 @@ fn bad_obstacles_name_the_field_and_the_id() {
 
     let skew = obstacle(
         "skew",
-        ObstacleShape::Box {
+        ObstacleShape::Box(OrientedBox {
             center: [0.0; 3],
             half_extents: [0.1; 3],
             rotation: [0.0, 0.0, 0.0, 2.0],
-        },
+        }),
     );
     assert_eq!(error_of(vec![skew]).0, "obstacles[0].rotation");
 

@@ -1,5 +1,6 @@
 //! Obstacle builders of the scene and optimiser tests.
 
+use dpmp::geometry::Sphere;
 use dpmp::scene::{Obstacle, ObstacleShape};
 
 /// The obstacle `id` with `shape`.
@@ -12,5 +13,5 @@ pub fn obstacle(id: &str, shape: ObstacleShape) -> Obstacle {
 
 /// The sphere obstacle `id` at `center` with `radius`.
 pub fn sphere(id: &str, center: [f64; 3], radius: f64) -> Obstacle {
-    obstacle(id, ObstacleShape::Sphere { center, radius })
+    obstacle(id, ObstacleShape::Sphere(Sphere { center, radius }))
 }
