@@ -2,7 +2,8 @@
 //! decoding a 7-joint annotation, conditioning on start + goal.
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
-use dpmp::promp::{annotation, example, fit_weights, Basis, PrompConfig, ViaPoint};
+use dpmp::fixtures::demonstrations as example;
+use dpmp::promp::{annotation, fit_weights, Basis, PrompConfig, ViaPoint};
 
 fn benches(c: &mut Criterion) {
     let config = PrompConfig::default();

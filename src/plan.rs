@@ -28,6 +28,7 @@
 use crate::net::Model;
 use crate::optim::{optimize_with, Goal, OptimizeRequest, OptimizeResponse, SolveControl};
 use crate::perception::{locate_target, Camera, DepthImage};
+use crate::promp::distribution::matrix_rows;
 use crate::promp::{Basis, FinalPointObservation, WeightDistribution};
 use crate::robot::Robot;
 use crate::{Error, Result};
@@ -334,19 +335,15 @@ fn check_dimensions(d: &WeightDistribution, robot: &Robot, basis: &Basis) -> Res
 
 fn prior_trajectory(d: &WeightDistribution, basis: &Basis) -> PriorTrajectory {
     PriorTrajectory {
-        mean: rows(&d.trajectory_mean(basis)),
-        std: rows(&d.trajectory_std(basis, 0.0)),
+        mean: matrix_rows(&d.trajectory_mean(basis)),
+        std: matrix_rows(&d.trajectory_std(basis, 0.0)),
     }
-}
-
-fn rows(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
-    m.row_iter().map(|r| r.iter().copied().collect()).collect()
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::promp::example::example_distribution;
+    use crate::fixtures::example_distribution;
     use crate::promp::PrompConfig;
 
     #[test]

@@ -43,13 +43,14 @@ use super::problem_file::{Expect, Meta, ProblemFile, CATEGORIES};
 use super::synth_target::{bench_generator, draw_target, SynthTarget};
 use super::witness::{find_witness, pin_start, reports, validated};
 use crate::geometry::{random_unit, Capsule, Sphere};
+use crate::promp::distribution::matrix_rows;
 use crate::promp::{fit_weights, Basis, WeightDistribution};
 use crate::robot::Robot;
 use crate::scene::{Obstacle, ObstacleShape, Scene};
 use crate::synth::demos::via_bump;
 use crate::synth::generate::Generator;
 use crate::{Error, Result};
-use nalgebra::{DMatrix, DVector, Vector3};
+use nalgebra::{DVector, Vector3};
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -212,7 +213,7 @@ fn try_make(
         _ => {}
     }
     let request = round_value(&json!({
-        "prior": {"mean": dist.mean.as_slice(), "cov": rows(&dist.cov)},
+        "prior": {"mean": dist.mean.as_slice(), "cov": matrix_rows(&dist.cov)},
         "promp": basis.config(),
         "duration_s": generator.settings().demos.duration_s,
         "start": path.start,
@@ -313,12 +314,6 @@ fn mean_path(robot: &Robot, basis: &Basis, dist: &WeightDistribution) -> MeanPat
         end: q.row(q.nrows() - 1).iter().copied().collect(),
         tcp: robot.tcp_path(&q),
     }
-}
-
-fn rows(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
-    (0..m.nrows())
-        .map(|r| m.row(r).iter().copied().collect())
-        .collect()
 }
 
 /// `x` rounded to [`SIGNIFICANT_DIGITS`] significant digits.

@@ -2,7 +2,9 @@
 //! create priors in the paper's annotation format.
 
 use crate::demos;
-use crate::promp::{annotation, example, Basis, Prior, PrompConfig};
+use crate::fixtures::demonstrations as example;
+use crate::promp::distribution::matrix_rows;
+use crate::promp::{annotation, Basis, Prior, PrompConfig};
 use crate::{Error, Result};
 use clap::{Args, Subcommand, ValueEnum};
 use nalgebra::DMatrix;
@@ -214,20 +216,14 @@ fn load(source: &Source) -> Result<(Prior, Basis)> {
     Ok((prior, basis))
 }
 
-fn rows(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
-    (0..m.nrows())
-        .map(|r| m.row(r).iter().copied().collect())
-        .collect()
-}
-
 fn inspect(args: &InspectArgs) -> Result<()> {
     let (prior, basis) = load(&args.source)?;
     let mean = prior.distribution.trajectory_mean(&basis);
     let std = prior.distribution.trajectory_std(&basis, 0.0);
     match args.format {
         OutputFormat::Json => crate::cli::print_json(&InspectReport {
-            mean: rows(&mean),
-            std: rows(&std),
+            mean: matrix_rows(&mean),
+            std: matrix_rows(&std),
             min_eigenvalue: prior.min_eigenvalue,
             repaired: prior.repaired,
             warnings: prior.warnings,

@@ -351,8 +351,9 @@ fn reach(rows: &PhaseRows, r: RowRef, radius: Option<f64>) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::fixtures::example_distribution;
     use crate::optim::whiten::Whitening;
-    use crate::promp::{example::example_distribution, Basis, PrompConfig};
+    use crate::promp::{Basis, PrompConfig};
 
     #[test]
     fn rows_are_exact_and_screening_never_drops_a_row_a_step_could_violate() {

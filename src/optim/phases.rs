@@ -265,7 +265,8 @@ impl PhaseRows {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::promp::{example::example_distribution, PrompConfig};
+    use crate::fixtures::example_distribution;
+    use crate::promp::PrompConfig;
 
     #[test]
     fn rows_reproduce_every_derivative_of_the_weights() {

@@ -89,7 +89,8 @@ impl Whitening {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::promp::{example::example_distribution, Basis, PrompConfig};
+    use crate::fixtures::example_distribution;
+    use crate::promp::{Basis, PrompConfig};
 
     #[test]
     fn whitening_round_trips_and_matches_the_direct_mahalanobis() {

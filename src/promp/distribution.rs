@@ -22,6 +22,32 @@ pub struct WeightDistribution {
     pub n_basis: usize,
 }
 
+/// The rows of `m` as nested vectors: the JSON form of a covariance
+/// (`cov`) and of a `T x n_joints` trajectory.
+pub fn matrix_rows(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
+    m.row_iter().map(|r| r.iter().copied().collect()).collect()
+}
+
+/// A weight distribution as plain arrays (`{"mean": [...], "cov": [[...]]}`,
+/// joint-major): the form datasets store and the optimiser's full prior
+/// takes.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DistributionJson {
+    /// Mean (n_joints * n_basis).
+    pub mean: Vec<f64>,
+    /// Covariance rows.
+    pub cov: Vec<Vec<f64>>,
+}
+
+impl From<&WeightDistribution> for DistributionJson {
+    fn from(dist: &WeightDistribution) -> Self {
+        DistributionJson {
+            mean: dist.mean.as_slice().to_vec(),
+            cov: matrix_rows(&dist.cov),
+        }
+    }
+}
+
 impl WeightDistribution {
     /// An error naming `basis` unless it has this distribution's number of
     /// basis functions.

@@ -26,7 +26,6 @@ pub mod codec;
 pub mod condition;
 pub mod config;
 pub mod distribution;
-pub mod example;
 pub mod fit;
 pub mod psd;
 pub mod task_condition;

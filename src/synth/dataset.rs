@@ -243,25 +243,7 @@ pub struct Demo {
     pub final_q: Vec<f64>,
 }
 
-/// Full weight distribution as plain arrays.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct DistributionJson {
-    /// Mean (n_joints * n_basis).
-    pub mean: Vec<f64>,
-    /// Covariance rows.
-    pub cov: Vec<Vec<f64>>,
-}
-
-impl From<&crate::promp::WeightDistribution> for DistributionJson {
-    fn from(dist: &crate::promp::WeightDistribution) -> Self {
-        DistributionJson {
-            mean: dist.mean.as_slice().to_vec(),
-            cov: (0..dist.dim())
-                .map(|r| dist.cov.row(r).iter().copied().collect())
-                .collect(),
-        }
-    }
-}
+pub use crate::promp::distribution::DistributionJson;
 
 /// `targets/<id>.json`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

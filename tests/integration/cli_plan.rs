@@ -11,6 +11,7 @@ use std::path::{Path, PathBuf};
 use crate::common::cli::dpmp;
 use crate::common::default_model_dir;
 use crate::common::json::{numbers, read_json};
+use crate::common::robot::final_tcp_pose;
 
 /// Generate one plant, return (dataset dir, first record).
 fn one_plant(dir: &Path) -> (PathBuf, Value) {
@@ -147,14 +148,7 @@ fn plan_with_depth_ends_near_the_demonstrations() {
     assert_eq!(answer["status"], "optimal", "{}", answer["reason"]);
     assert_eq!(answer["target"]["source"], "depth");
     let robot = Robot::panda().unwrap();
-    let last = answer["trajectory"]["points"]
-        .as_array()
-        .unwrap()
-        .last()
-        .unwrap()
-        .clone();
-    let q = numbers(&last["positions"]);
-    let tcp = robot.tcp_pose(&q).translation.vector;
+    let tcp = final_tcp_pose(&robot, &answer).translation.vector;
     let demos = numbers(&record["final_tcp"]["position"]);
     let error = (tcp - nalgebra::Vector3::from_row_slice(&demos)).norm();
     assert!(
@@ -179,21 +173,7 @@ fn eval_reports_depth_aware_planning_on_a_dataset_with_depth() {
     let dir = tempfile::tempdir().unwrap();
     let (data, record) = one_plant(dir.path());
     let out = dir.path().join("eval");
-    let o = dpmp(&[
-        "eval",
-        "--model",
-        default_model_dir().to_str().unwrap(),
-        "--data",
-        data.to_str().unwrap(),
-        "--split",
-        "all",
-        "--format",
-        "json",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let report: Value = serde_json::from_slice(&o.stdout).unwrap();
+    let report = eval_json(&data, &out, &["--split", "all"]);
     assert_eq!(report["plan_targets"], 1);
     let figure = |k: &str| report[k].as_f64().unwrap_or_else(|| panic!("{k} missing"));
     assert!(figure("target_position_error_m") < 0.008);
@@ -227,19 +207,7 @@ fn eval_on_a_test_split_reports_the_condition_only_baseline() {
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let out = dir.path().join("eval");
-    let o = dpmp(&[
-        "eval",
-        "--model",
-        default_model_dir().to_str().unwrap(),
-        "--data",
-        data.to_str().unwrap(),
-        "--format",
-        "json",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let report: Value = serde_json::from_slice(&o.stdout).unwrap();
+    let report = eval_json(&data, &out, &[]);
     assert_eq!(report["split"], "test");
     assert_eq!(report["baseline_inputs"], "box centre + depth");
     let error = report["baseline_mean_final_position_error_m"]
@@ -307,4 +275,25 @@ fn without_depth_the_box_only_model_plans_and_the_default_says_so() {
         err.contains("depth") && err.contains("models/rgb-only"),
         "{err}"
     );
+}
+
+/// `dpmp eval` of the shipped model on `data` (plus `extra` flags), its
+/// JSON report; plots and CSVs go to `out`.
+fn eval_json(data: &Path, out: &Path, extra: &[&str]) -> Value {
+    let model = default_model_dir();
+    let mut args = vec![
+        "eval",
+        "--model",
+        model.to_str().unwrap(),
+        "--data",
+        data.to_str().unwrap(),
+        "--format",
+        "json",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    let o = dpmp(&args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    serde_json::from_slice(&o.stdout).unwrap()
 }

@@ -21,7 +21,7 @@ const DEMOS: usize = 200;
 /// The known distribution: the example prior with half its spread.
 fn known() -> (Basis, WeightDistribution) {
     let basis = Basis::new(&PrompConfig::default()).unwrap();
-    let mut dist = dpmp::promp::example::example_distribution(&basis, 30, 5).unwrap();
+    let mut dist = dpmp::fixtures::example_distribution(&basis, 30, 5).unwrap();
     dist.cov *= 0.25;
     (basis, dist)
 }

@@ -18,12 +18,7 @@ fn health_ready_and_metrics_answer() {
     assert_eq!(body["ready"], json!(true));
     assert_eq!(body["shutting_down"], json!(false));
 
-    let text = c
-        .get(server.url("/metrics"))
-        .send()
-        .unwrap()
-        .text()
-        .unwrap();
+    let text = metrics_text(&c, &server);
     // The two requests above were counted by route template and status.
     assert!(
         text.contains(
@@ -129,13 +124,18 @@ fn optimize_answers_a_verified_trajectory() {
     }
     assert!(body["mahalanobis"].as_f64().unwrap() >= 0.0);
     // The solve was counted in the metrics.
-    let text = c
-        .get(server.url("/metrics"))
-        .send()
-        .unwrap()
-        .text()
-        .unwrap();
+    let text = metrics_text(&c, &server);
     assert!(text.contains("dpmp_solver_iterations_count 1"), "{text}");
+    assert!(
+        text.contains("dpmp_solver_duration_seconds_count 1"),
+        "{text}"
+    );
+    if std::path::Path::new("/proc/self/stat").exists() {
+        assert!(
+            text.contains("# TYPE process_resident_memory_bytes gauge"),
+            "{text}"
+        );
+    }
 }
 
 #[test]
@@ -402,4 +402,13 @@ mod ros2 {
         pub joint_names: Vec<String>,
         pub points: Vec<JointTrajectoryPoint>,
     }
+}
+
+/// The `/metrics` exposition text.
+fn metrics_text(c: &reqwest::blocking::Client, server: &dpmp::service::RunningServer) -> String {
+    c.get(server.url("/metrics"))
+        .send()
+        .unwrap()
+        .text()
+        .unwrap()
 }

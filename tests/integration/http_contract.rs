@@ -4,7 +4,7 @@
 
 use crate::common::http::*;
 use crate::common::requests::typical_json;
-use crate::common::schema::validate;
+use crate::common::schema::{unknown_keywords, validate};
 use dpmp::service::routes;
 use serde_json::Value;
 use std::collections::BTreeSet;
@@ -103,4 +103,44 @@ fn documented_examples_validate() {
     let example = &spec["paths"]["/v1/optimize"]["post"]["requestBody"]["content"]
         ["application/json"]["examples"]["annotation_prior"]["value"];
     let _: dpmp::optim::OptimizeRequest = serde_json::from_value(example.clone()).unwrap();
+}
+
+/// Every schema in the spec: the components and each operation's request
+/// and response bodies, with a JSON-pointer-like path.
+fn spec_schemas(spec: &Value) -> Vec<(String, &Value)> {
+    let mut out: Vec<(String, &Value)> = spec["components"]["schemas"]
+        .as_object()
+        .unwrap()
+        .iter()
+        .map(|(name, s)| (format!("#/components/schemas/{name}"), s))
+        .collect();
+    for (path, item) in spec["paths"].as_object().unwrap() {
+        for (method, op) in item.as_object().unwrap() {
+            let bodies = std::iter::once(&op["requestBody"]).chain(
+                op["responses"]
+                    .as_object()
+                    .into_iter()
+                    .flatten()
+                    .map(|(_, r)| r),
+            );
+            for body in bodies {
+                for (media, content) in body["content"].as_object().into_iter().flatten() {
+                    out.push((format!("{method} {path} {media}"), &content["schema"]));
+                }
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn spec_schemas_use_only_known_keywords() {
+    let spec = openapi();
+    let schemas = spec_schemas(&spec);
+    assert!(schemas.len() > 30, "only {} schemas found", schemas.len());
+    let unknown: Vec<String> = schemas
+        .iter()
+        .flat_map(|(path, schema)| unknown_keywords(schema, path))
+        .collect();
+    assert!(unknown.is_empty(), "unknown schema keywords: {unknown:#?}");
 }

@@ -8,6 +8,7 @@
 
 use crate::common::http::*;
 use crate::common::json::numbers;
+use crate::common::robot::final_tcp_pose;
 use base64::Engine as _;
 use dpmp::net::Model;
 use dpmp::robot::Robot;
@@ -42,8 +43,21 @@ fn generated_target_with_depth() -> (Vec<u8>, Vec<u8>, TargetRecord) {
     (jpeg, depth, out.records[0].clone())
 }
 
-#[test]
-fn plan_with_the_shipped_model_over_http() {
+/// A server with the shipped model and its answer (200, contract-checked)
+/// to the generated target with depth, with everything that made it.
+struct DepthPlan {
+    _server: RunningServer,
+    c: reqwest::blocking::Client,
+    url: String,
+    jpeg: Vec<u8>,
+    depth: Vec<u8>,
+    record: TargetRecord,
+    fields: Value,
+    body: Value,
+    answer: Value,
+}
+
+fn plan_generated_target_with_depth() -> DepthPlan {
     let server = start_with_default_model();
     let c = client();
     let url = server.url("/v1/plan");
@@ -52,6 +66,32 @@ fn plan_with_the_shipped_model_over_http() {
     let (s, answer) = post_json(&c, &url, body.to_string());
     assert_eq!(s, 200, "{answer}");
     assert_valid(&openapi(), "post", "/v1/plan", s, &answer);
+    DepthPlan {
+        _server: server,
+        c,
+        url,
+        jpeg,
+        depth,
+        record,
+        fields,
+        body,
+        answer,
+    }
+}
+
+#[test]
+fn plan_with_the_shipped_model_over_http() {
+    let DepthPlan {
+        _server,
+        c,
+        url,
+        jpeg,
+        depth,
+        fields,
+        body,
+        answer,
+        ..
+    } = plan_generated_target_with_depth();
 
     // The prior: 150 samples x 7 joints, positive spread.
     let mean = answer["prior"]["mean"].as_array().unwrap();
@@ -160,14 +200,17 @@ fn distance(a: &[f64], b: &[f64]) -> f64 {
 
 #[test]
 fn plan_with_depth_goes_to_the_berry_it_measured() {
-    let server = start_with_default_model();
-    let c = client();
-    let url = server.url("/v1/plan");
-    let (jpeg, depth, record) = generated_target_with_depth();
-    let (fields, body) = depth_request(&jpeg, &depth, &record);
-    let (s, answer) = post_json(&c, &url, body.to_string());
-    assert_eq!(s, 200, "{answer}");
-    assert_valid(&openapi(), "post", "/v1/plan", s, &answer);
+    let DepthPlan {
+        _server,
+        c,
+        url,
+        jpeg,
+        depth,
+        record,
+        fields,
+        answer,
+        ..
+    } = plan_generated_target_with_depth();
 
     // The measured berry, and the goal 10 cm short of it towards home.
     let target = &answer["target"];
@@ -187,16 +230,7 @@ fn plan_with_depth_goes_to_the_berry_it_measured() {
 
     // An optimal plan ends within the goal's tolerance, near the demos.
     assert_eq!(answer["status"], "optimal", "{}", answer["reason"]);
-    let last = answer["trajectory"]["points"]
-        .as_array()
-        .unwrap()
-        .last()
-        .unwrap()
-        .clone();
-    let tcp = robot
-        .tcp_pose(&numbers(&last["positions"]))
-        .translation
-        .vector;
+    let tcp = final_tcp_pose(&robot, &answer).translation.vector;
     let tolerance = target["goal_tolerance_m"].as_f64().unwrap();
     assert!(distance(tcp.as_slice(), &goal) <= tolerance + 1e-6);
     assert!(distance(tcp.as_slice(), &record.final_tcp.position) < 0.015);
@@ -345,15 +379,8 @@ fn a_derived_goal_takes_the_request_s_approach_direction() {
     let (s, free) = post_json(&c, &url, body.to_string());
     assert_eq!(s, 200, "{free}");
     let robot = Robot::panda().unwrap();
-    let final_axis = |answer: &Value| {
-        let last = answer["trajectory"]["points"]
-            .as_array()
-            .unwrap()
-            .last()
-            .unwrap()
-            .clone();
-        robot.tcp_pose(&numbers(&last["positions"])).rotation * nalgebra::Vector3::z()
-    };
+    let final_axis =
+        |answer: &Value| final_tcp_pose(&robot, answer).rotation * nalgebra::Vector3::z();
     // Ask for an axis 0.15 rad off the one the plan ends with, within 0.05.
     let a0 = final_axis(&free);
     let side = nalgebra::Unit::new_normalize(a0.cross(&nalgebra::Vector3::x()));

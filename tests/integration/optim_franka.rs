@@ -4,9 +4,10 @@
 //! at 10× the optimisation sampling against Franka's published numbers.
 
 use crate::common::robot::panda;
+use dpmp::fixtures::example_distribution;
 use dpmp::fixtures::{typical_request, ExampleSettings};
 use dpmp::optim::{optimize, Boundary, OptimizeRequest, OptimizeResponse, Status};
-use dpmp::promp::{example::example_distribution, Basis, PrompConfig};
+use dpmp::promp::{Basis, PrompConfig};
 use dpmp::robot::Robot;
 use dpmp::Error;
 use nalgebra::Vector3;

@@ -19,6 +19,9 @@ pub const MAX_PHASE_SAMPLES: usize = 2000;
 pub const DEFAULT_ACTIVATION_MARGIN_M: f64 = 0.01;
 /// Largest accepted `options.restarts`.
 pub const MAX_RESTARTS: usize = 32;
+/// Largest accepted `options.max_iterations` (of the run from the prior
+/// mean; each restart adds at most `restart::RESTART_MAX_ITERATIONS`).
+pub const MAX_ITERATIONS: usize = 1000;
 /// Largest accepted `duration_s`.
 pub const MAX_DURATION_S: f64 = 600.0;
 
@@ -130,13 +133,8 @@ pub enum PriorSpec {
 impl From<&crate::promp::WeightDistribution> for PriorSpec {
     /// The full Gaussian of a weight distribution (joint-major).
     fn from(dist: &crate::promp::WeightDistribution) -> Self {
-        let n = dist.dim();
-        PriorSpec::Full {
-            mean: dist.mean.as_slice().to_vec(),
-            cov: (0..n)
-                .map(|r| (0..n).map(|c| dist.cov[(r, c)]).collect())
-                .collect(),
-        }
+        let crate::promp::distribution::DistributionJson { mean, cov } = dist.into();
+        PriorSpec::Full { mean, cov }
     }
 }
 

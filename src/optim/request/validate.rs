@@ -5,7 +5,10 @@
 
 use super::DEFAULT_ACTIVATION_MARGIN_M;
 use super::{Boundary, Goal, OptimizeRequest, PriorSpec, SolverOptions};
-use super::{MAX_DURATION_S, MAX_EXTRA_SAMPLES, MAX_OBSTACLES, MAX_PHASE_SAMPLES, MAX_RESTARTS};
+use super::{
+    MAX_DURATION_S, MAX_EXTRA_SAMPLES, MAX_ITERATIONS, MAX_OBSTACLES, MAX_PHASE_SAMPLES,
+    MAX_RESTARTS,
+};
 use crate::error::{ensure_finite, ensure_in_range as check_range, ensure_positive};
 use crate::optim::linear::LinearSet;
 use crate::optim::phases::{PhaseRows, TimeWarp};
@@ -207,10 +210,10 @@ fn validate_options(o: &SolverOptions, clearance: f64, robot: &Robot) -> Result<
     if let Some(l) = o.lambda {
         check_range("options.lambda", l, 1e-15, 1e6)?;
     }
-    if !(1..=1000).contains(&o.max_iterations) {
+    if !(1..=MAX_ITERATIONS).contains(&o.max_iterations) {
         return Err(Error::invalid(
             "options.max_iterations",
-            format!("must be in 1..=1000, got {}", o.max_iterations),
+            format!("must be in 1..={MAX_ITERATIONS}, got {}", o.max_iterations),
         ));
     }
     if o.restarts > MAX_RESTARTS {

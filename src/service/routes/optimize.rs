@@ -74,7 +74,9 @@ pub fn status_name(status: Status) -> &'static str {
 
 /// Count a finished solve in the metrics.
 pub fn record_solve(state: &AppState, response: &OptimizeResponse) {
-    state
-        .metrics()
-        .record_solve(status_name(response.status), response.report.iterations);
+    state.metrics().record_solve(
+        status_name(response.status),
+        response.report.iterations,
+        response.report.solve_ms / 1e3,
+    );
 }

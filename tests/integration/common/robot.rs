@@ -3,6 +3,8 @@
 
 use dpmp::robot::hull::ConvexHull;
 use dpmp::robot::{Robot, ShapeGeometry};
+use nalgebra::Isometry3;
+use serde_json::Value;
 
 /// The shipped Panda.
 pub fn panda() -> Robot {
@@ -18,6 +20,15 @@ pub fn at_fractions(robot: &Robot, fractions: &[f64]) -> Vec<f64> {
         .zip(fractions)
         .map(|(l, f)| l.lower + f * (l.upper - l.lower))
         .collect()
+}
+
+/// The TCP pose at the last point of a JSON answer's `trajectory`.
+pub fn final_tcp_pose(robot: &Robot, answer: &Value) -> Isometry3<f64> {
+    let last = answer["trajectory"]["points"]
+        .as_array()
+        .and_then(|points| points.last())
+        .unwrap_or_else(|| panic!("no trajectory points in {answer}"));
+    robot.tcp_pose(&crate::common::json::numbers(&last["positions"]))
 }
 
 /// Every mesh link of `robot`: (link index, hull in the link frame).
