@@ -84,6 +84,7 @@ impl From<OrientedBox> for Primitive {
 }
 
 /// The midpoint of `a` and `b`.
+#[inline]
 pub fn midpoint(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
     ((Vector3::from(*a) + Vector3::from(*b)) * 0.5).into()
 }
@@ -91,6 +92,7 @@ pub fn midpoint(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
 impl Primitive {
     /// The same primitive expressed in the frame where `pose` maps its
     /// current frame (e.g. link frame to base frame).
+    #[inline]
     pub fn transformed(&self, pose: &Isometry3<f64>) -> Primitive {
         let map = |p: &[f64; 3]| -> [f64; 3] { (pose * Point3::from(*p)).coords.into() };
         match self {
@@ -149,6 +151,7 @@ impl Primitive {
     /// Segment and radius `(a, b, r)` of a capsule containing the
     /// primitive: sphere `(c, c, r)`, capsule `(a, b, r)`, box `(c, c, |h|)`
     /// (the same triple as `ConvexHull::bound`).
+    #[inline]
     pub fn bounding_capsule(&self) -> ([f64; 3], [f64; 3], f64) {
         match self {
             Primitive::Sphere(s) => (s.center, s.center, s.radius),

@@ -8,11 +8,13 @@ use nalgebra::{Quaternion, UnitQuaternion};
 pub const IDENTITY_XYZW: [f64; 4] = [0.0, 0.0, 0.0, 1.0];
 
 /// Normalised quaternion from `[x, y, z, w]`.
+#[inline]
 pub fn from_xyzw(q: &[f64; 4]) -> UnitQuaternion<f64> {
     UnitQuaternion::from_quaternion(Quaternion::new(q[3], q[0], q[1], q[2]))
 }
 
 /// A unit quaternion as `[x, y, z, w]`.
+#[inline]
 pub fn to_xyzw(q: &UnitQuaternion<f64>) -> [f64; 4] {
     [q.i, q.j, q.k, q.w]
 }

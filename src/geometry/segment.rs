@@ -6,6 +6,7 @@ use nalgebra::Vector3;
 
 /// Closest points between segments `p1`–`q1` and `p2`–`q2` (Ericson,
 /// "Real-Time Collision Detection" §5.1.9).
+#[inline]
 pub fn closest_segments(
     p1: &Vector3<f64>,
     q1: &Vector3<f64>,
@@ -47,6 +48,7 @@ pub fn closest_segments(
 
 /// Distance between the segments `p1`–`q1` and `p2`–`q2` (closest points
 /// from [`closest_segments`]); points are segments of zero length.
+#[inline]
 pub fn segment_distance(
     p1: &Vector3<f64>,
     q1: &Vector3<f64>,
@@ -58,6 +60,7 @@ pub fn segment_distance(
 }
 
 /// Distance from `p` to the segment `a`–`b`.
+#[inline]
 pub fn point_segment_distance(p: &Vector3<f64>, a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
     let (_, y) = closest_segments(p, p, a, b);
     (y - p).norm()

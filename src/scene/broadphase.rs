@@ -48,6 +48,7 @@ impl Bounds {
     }
 
     /// The box around a primitive.
+    #[inline]
     pub fn of_primitive(primitive: &Primitive) -> Bounds {
         let v = Vector3::from;
         match primitive {
@@ -125,6 +126,7 @@ impl Core {
     }
 
     /// The core around a primitive: its bounding capsule.
+    #[inline]
     pub fn of_primitive(primitive: &Primitive) -> Core {
         let (a, b, radius) = primitive.bounding_capsule();
         Core::new(Vector3::from(a), Vector3::from(b), radius)

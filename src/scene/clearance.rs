@@ -191,7 +191,8 @@ impl Scene {
         let Some(all) = self.bounds else {
             return;
         };
-        for shape in place_robot(robot, frames) {
+        for index in 0..robot.collision_shapes().len() {
+            let shape = place_shape(robot, frames, index);
             if ruled_out(shape.bounds.gap(&all), limit) {
                 continue;
             }

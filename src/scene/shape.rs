@@ -198,6 +198,7 @@ impl LocalShape {
 /// A primitive as a parry shape in a local frame, and that frame's pose in
 /// the primitive's frame: the ball's centre, the capsule's midpoint, the
 /// box's centre and rotation.
+#[inline]
 pub fn local_primitive(primitive: &Primitive) -> (LocalShape, Isometry3<f64>) {
     match primitive {
         Primitive::Sphere(s) => (
@@ -249,6 +250,7 @@ impl RobotPart {
     }
 
     /// Build from a base-frame primitive.
+    #[inline]
     pub fn primitive(primitive: &Primitive) -> RobotPart {
         let (shape, pose) = local_primitive(primitive);
         RobotPart::Primitive(shape, pose)
