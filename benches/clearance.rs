@@ -9,7 +9,7 @@
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use dpmp::robot::{Robot, PANDA_HOME};
-use dpmp::scene::{Obstacle, ObstacleShape, Scene};
+use dpmp::scene::{BerryShape, Obstacle, ObstacleShape, Scene};
 use nalgebra::Point3;
 
 /// 20 berries with stems in a 12 x 10 x 16 cm cluster centred `ahead` m in
@@ -27,13 +27,13 @@ fn berry_cluster(robot: &Robot, ahead: f64) -> Vec<Obstacle> {
             let c = tcp * local;
             Obstacle {
                 id: format!("berry-{i}"),
-                shape: ObstacleShape::Berry {
+                shape: ObstacleShape::Berry(BerryShape {
                     center: [c.x, c.y, c.z],
                     radius: 0.012 + 0.001 * (i % 4) as f64,
                     elongation: 0.004,
                     stem_top: [c.x, c.y, c.z + 0.07],
                     stem_radius: 0.002,
-                },
+                }),
             }
         })
         .collect()

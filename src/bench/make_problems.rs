@@ -46,7 +46,7 @@ use crate::geometry::{random_unit, Capsule, Sphere};
 use crate::promp::distribution::matrix_rows;
 use crate::promp::{fit_weights, Basis, WeightDistribution};
 use crate::robot::Robot;
-use crate::scene::{Obstacle, ObstacleShape, Scene};
+use crate::scene::{BerryShape, Obstacle, ObstacleShape, Scene};
 use crate::synth::demos::via_bump;
 use crate::synth::generate::Generator;
 use crate::{Error, Result};
@@ -428,13 +428,13 @@ fn dense_cluster(goal: &Vector3<f64>, rng: &mut ChaCha8Rng) -> Vec<Obstacle> {
             let radius = rng.gen_range(0.01..0.018);
             Obstacle {
                 id: format!("bench-berry-{k}"),
-                shape: ObstacleShape::Berry {
+                shape: ObstacleShape::Berry(BerryShape {
                     center: c.into(),
                     radius,
                     elongation: rng.gen_range(0.0..0.006),
                     stem_top: (c + Vector3::z() * rng.gen_range(0.03..0.05)).into(),
                     stem_radius: 0.002,
-                },
+                }),
             }
         })
         .collect()

@@ -18,7 +18,7 @@ pub mod shape;
 
 pub use clearance::Clearance;
 pub use compiled::Scene;
-pub use obstacle::{Obstacle, ObstacleShape, SceneFile};
+pub use obstacle::{BerryShape, Obstacle, ObstacleShape, SceneFile};
 
 #[cfg(test)]
 mod tests {

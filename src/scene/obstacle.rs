@@ -56,26 +56,31 @@ pub enum ObstacleShape {
         /// Hull points.
         points: Vec<[f64; 3]>,
     },
-    /// A strawberry with its stem: the body is the set of points within
-    /// `radius` of the segment of half-length `elongation` through `center`
-    /// along the stem direction (a sphere when `elongation` is 0, an
-    /// ellipsoid-like capsule otherwise); the stem is a capsule of
-    /// `stem_radius` from the top of the body to `stem_top`.
-    Berry {
-        /// Centre of the body.
-        center: [f64; 3],
-        /// Body radius across the stem axis (m, > 0).
-        radius: f64,
-        /// Extra half-length of the body along the stem axis (m, >= 0).
-        #[serde(default)]
-        elongation: f64,
-        /// Upper end of the stem (where it joins the plant); it sets the
-        /// stem axis and must lie outside the body.
-        stem_top: [f64; 3],
-        /// Stem radius (m, > 0, at most `radius`).
-        #[serde(default = "default_stem_radius")]
-        stem_radius: f64,
-    },
+    /// A strawberry with its stem ([`BerryShape`]).
+    Berry(BerryShape),
+}
+
+/// A strawberry with its stem: the body is the set of points within
+/// `radius` of the segment of half-length `elongation` through `center`
+/// along the stem direction (a sphere when `elongation` is 0, an
+/// ellipsoid-like capsule otherwise); the stem is a capsule of
+/// `stem_radius` from the top of the body to `stem_top`.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct BerryShape {
+    /// Centre of the body.
+    pub center: [f64; 3],
+    /// Body radius across the stem axis (m, > 0).
+    pub radius: f64,
+    /// Extra half-length of the body along the stem axis (m, >= 0).
+    #[serde(default)]
+    pub elongation: f64,
+    /// Upper end of the stem (where it joins the plant); it sets the
+    /// stem axis and must lie outside the body.
+    pub stem_top: [f64; 3],
+    /// Stem radius (m, > 0, at most `radius`).
+    #[serde(default = "default_stem_radius")]
+    pub stem_radius: f64,
 }
 
 /// The `--scene FILE.json` format: `{"obstacles": [...]}`.
@@ -120,7 +125,7 @@ impl ObstacleShape {
             ObstacleShape::Box(b) => Some((*b).into()),
             ObstacleShape::Cylinder { .. }
             | ObstacleShape::Convex { .. }
-            | ObstacleShape::Berry { .. } => None,
+            | ObstacleShape::Berry(_) => None,
         }
     }
 
@@ -129,7 +134,7 @@ impl ObstacleShape {
         match self {
             ObstacleShape::Sphere(s) => s.center,
             ObstacleShape::Box(b) => b.center,
-            ObstacleShape::Berry { center, .. } => *center,
+            ObstacleShape::Berry(berry) => berry.center,
             ObstacleShape::Capsule(Capsule { a, b, .. }) | ObstacleShape::Cylinder { a, b, .. } => {
                 midpoint(a, b)
             }
@@ -156,13 +161,7 @@ impl Obstacle {
             ObstacleShape::Cylinder { a, b, radius } => check.cylinder(a, b, *radius),
             ObstacleShape::Box(b) => check.oriented_box(b),
             ObstacleShape::Convex { points } => check.convex(points),
-            ObstacleShape::Berry {
-                center,
-                radius,
-                elongation,
-                stem_top,
-                stem_radius,
-            } => check.berry(center, *radius, *elongation, stem_top, *stem_radius),
+            ObstacleShape::Berry(berry) => check.berry(berry),
         }
     }
 }
@@ -266,31 +265,27 @@ impl Check<'_> {
 
     /// Finite centre and stem top outside the body; radius > 0, elongation
     /// >= 0, 0 < stem radius <= radius.
-    fn berry(
-        &self,
-        center: &[f64; 3],
-        radius: f64,
-        elongation: f64,
-        stem_top: &[f64; 3],
-        stem_radius: f64,
-    ) -> Result<()> {
-        self.finite("center", center)?;
-        self.positive("radius", radius)?;
-        if !(elongation.is_finite() && elongation >= 0.0) {
+    fn berry(&self, b: &BerryShape) -> Result<()> {
+        self.finite("center", &b.center)?;
+        self.positive("radius", b.radius)?;
+        if !(b.elongation.is_finite() && b.elongation >= 0.0) {
             return Err(self.fail(
                 "elongation",
-                format!("must be a finite number >= 0, got {elongation}"),
+                format!("must be a finite number >= 0, got {}", b.elongation),
             ));
         }
-        self.finite("stem_top", stem_top)?;
-        self.positive("stem_radius", stem_radius)?;
-        if stem_radius > radius {
+        self.finite("stem_top", &b.stem_top)?;
+        self.positive("stem_radius", b.stem_radius)?;
+        if b.stem_radius > b.radius {
             return Err(self.fail(
                 "stem_radius",
-                format!("must not exceed the radius {radius}, got {stem_radius}"),
+                format!(
+                    "must not exceed the radius {}, got {}",
+                    b.radius, b.stem_radius
+                ),
             ));
         }
-        if distance(center, stem_top) <= radius + elongation {
+        if distance(&b.center, &b.stem_top) <= b.radius + b.elongation {
             return Err(self.fail("stem_top", "must lie outside the berry body"));
         }
         Ok(())

@@ -5,7 +5,7 @@
 //! [`super::distance`]), so parts keep their poses in `f64` here.
 
 use super::broadphase::{Bounds, Core};
-use super::obstacle::ObstacleShape;
+use super::obstacle::{BerryShape, ObstacleShape};
 use crate::geometry::{quaternion, Capsule, Primitive, Sphere};
 use crate::robot::hull::ConvexHull;
 use crate::robot::ShapeGeometry;
@@ -53,19 +53,7 @@ pub fn compile_obstacle(shape: &ObstacleShape) -> Option<CompiledObstacle> {
         ObstacleShape::Box(b) => Some(primitive_obstacle(&(*b).into())),
         ObstacleShape::Cylinder { a, b, radius } => Some(cylinder_obstacle(a, b, *radius)),
         ObstacleShape::Convex { points } => convex_obstacle(points),
-        ObstacleShape::Berry {
-            center,
-            radius,
-            elongation,
-            stem_top,
-            stem_radius,
-        } => Some(berry_obstacle(
-            center,
-            *radius,
-            *elongation,
-            stem_top,
-            *stem_radius,
-        )),
+        ObstacleShape::Berry(berry) => Some(berry_obstacle(berry)),
     }
 }
 
@@ -111,14 +99,15 @@ fn convex_obstacle(points: &[[f64; 3]]) -> Option<CompiledObstacle> {
 
 /// A berry: its body (a ball, or a capsule along the stem axis when
 /// elongated) and its stem capsule, from the top of the body to `stem_top`.
-fn berry_obstacle(
-    center: &[f64; 3],
-    radius: f64,
-    elongation: f64,
-    stem_top: &[f64; 3],
-    stem_radius: f64,
-) -> CompiledObstacle {
-    let (c, top) = (Vector3::from(*center), Vector3::from(*stem_top));
+fn berry_obstacle(berry: &BerryShape) -> CompiledObstacle {
+    let BerryShape {
+        center,
+        radius,
+        elongation,
+        stem_top,
+        stem_radius,
+    } = *berry;
+    let (c, top) = (Vector3::from(center), Vector3::from(stem_top));
     let up = (top - c).normalize();
     let body: Primitive = if elongation > 0.0 {
         Capsule {
@@ -128,16 +117,12 @@ fn berry_obstacle(
         }
         .into()
     } else {
-        Sphere {
-            center: *center,
-            radius,
-        }
-        .into()
+        Sphere { center, radius }.into()
     };
     let stem_base = c + up * (elongation + radius - stem_radius).max(0.0);
     let stem: Primitive = Capsule {
         a: stem_base.into(),
-        b: *stem_top,
+        b: stem_top,
         radius: stem_radius,
     }
     .into();

@@ -8,7 +8,7 @@
 //! convex slabs, the tray a box.
 
 use crate::geometry::{Capsule, OrientedBox};
-use crate::scene::{Obstacle, ObstacleShape, SceneFile};
+use crate::scene::{BerryShape, Obstacle, ObstacleShape, SceneFile};
 use crate::synth::plant::{Berry, Plant};
 
 /// Rim points per leaflet hull (each on both faces of the slab).
@@ -28,13 +28,13 @@ pub fn berry_obstacle(b: &Berry, stem_radius: f64) -> Obstacle {
     let stem_top = b.calyx() - b.axis().into_inner() * CALYX_STEM_M;
     Obstacle {
         id: b.id.clone(),
-        shape: ObstacleShape::Berry {
+        shape: ObstacleShape::Berry(BerryShape {
             center: arr(&center),
             radius: b.r_top,
             elongation: 0.5 * (b.tip - b.top).norm(),
             stem_top: arr(&stem_top),
             stem_radius: stem_radius.min(b.r_top),
-        },
+        }),
     }
 }
 
@@ -113,12 +113,12 @@ mod tests {
         let obstacles = plant_obstacles(&plant);
         Scene::new(obstacles.clone()).unwrap();
         for (b, o) in plant.berries.iter().zip(&obstacles) {
-            let ObstacleShape::Berry {
+            let ObstacleShape::Berry(BerryShape {
                 center,
                 radius,
                 elongation,
                 ..
-            } = o.shape
+            }) = o.shape
             else {
                 panic!("{} is not a berry obstacle", o.id);
             };
@@ -132,7 +132,7 @@ mod tests {
         let kinds: Vec<&str> = obstacles
             .iter()
             .map(|o| match o.shape {
-                ObstacleShape::Berry { .. } => "berry",
+                ObstacleShape::Berry(_) => "berry",
                 ObstacleShape::Capsule(_) => "capsule",
                 ObstacleShape::Convex { .. } => "convex",
                 ObstacleShape::Box(_) => "box",

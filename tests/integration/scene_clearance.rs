@@ -6,7 +6,7 @@ use crate::common::robot::{at_fractions, panda};
 use crate::common::scene::sphere;
 use dpmp::geometry::{Capsule, OrientedBox, Primitive};
 use dpmp::robot::{Robot, PANDA_HOME};
-use dpmp::scene::{Obstacle, ObstacleShape, Scene};
+use dpmp::scene::{BerryShape, Obstacle, ObstacleShape, Scene};
 use nalgebra::{Point3, Vector3};
 use proptest::prelude::*;
 
@@ -47,13 +47,13 @@ pub fn berry_cluster() -> Vec<Obstacle> {
             ];
             Obstacle {
                 id: format!("berry-{i}"),
-                shape: ObstacleShape::Berry {
+                shape: ObstacleShape::Berry(BerryShape {
                     center,
                     radius: 0.012 + 0.0005 * (i % 5) as f64,
                     elongation: 0.004,
                     stem_top: [center[0], center[1], center[2] + 0.06],
                     stem_radius: 0.002,
-                },
+                }),
             }
         })
         .collect()
@@ -253,13 +253,13 @@ fn berries_are_a_body_plus_a_stem() {
     let center = tcp * Point3::new(0.0, 0.0, 0.15);
     let berry = Obstacle {
         id: "berry".into(),
-        shape: ObstacleShape::Berry {
+        shape: ObstacleShape::Berry(BerryShape {
             center: center.coords.into(),
             radius: 0.015,
             elongation: 0.005,
             stem_top: (center + Vector3::new(0.0, 0.0, 0.08)).coords.into(),
             stem_radius: 0.002,
-        },
+        }),
     };
     let scene = Scene::new(vec![berry]).unwrap();
     let c = scene.min_clearance(&robot, &frames).unwrap();

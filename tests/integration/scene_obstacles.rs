@@ -3,7 +3,7 @@
 
 use crate::common::scene::{obstacle, sphere};
 use dpmp::geometry::{OrientedBox, Sphere};
-use dpmp::scene::{Obstacle, ObstacleShape, Scene, SceneFile};
+use dpmp::scene::{BerryShape, Obstacle, ObstacleShape, Scene, SceneFile};
 
 const REQUEST_OBSTACLES: &str = r#"{"obstacles": [
     {"id": "berry-2", "type": "sphere", "center": [0.6, 0.0, 0.7], "radius": 0.015},
@@ -40,11 +40,11 @@ fn the_request_examples_parse_and_round_trip() {
         other => panic!("{other:?}"),
     }
     match &file.obstacles[5].shape {
-        ObstacleShape::Berry {
+        ObstacleShape::Berry(BerryShape {
             elongation,
             stem_radius,
             ..
-        } => {
+        }) => {
             assert_eq!(*elongation, 0.005);
             assert_eq!(*stem_radius, 0.002);
         }
@@ -169,13 +169,13 @@ fn bad_obstacles_name_the_field_and_the_id() {
 
     let swallowed_stem = obstacle(
         "berry-9",
-        ObstacleShape::Berry {
+        ObstacleShape::Berry(BerryShape {
             center: [0.0; 3],
             radius: 0.02,
             elongation: 0.01,
             stem_top: [0.0, 0.0, 0.025],
             stem_radius: 0.002,
-        },
+        }),
     );
     let (field, msg) = error_of(vec![swallowed_stem]);
     assert_eq!(field, "obstacles[0].stem_top");
@@ -183,13 +183,13 @@ fn bad_obstacles_name_the_field_and_the_id() {
 
     let fat_stem = obstacle(
         "berry-8",
-        ObstacleShape::Berry {
+        ObstacleShape::Berry(BerryShape {
             center: [0.0; 3],
             radius: 0.01,
             elongation: 0.0,
             stem_top: [0.0, 0.0, 0.1],
             stem_radius: 0.02,
-        },
+        }),
     );
     assert_eq!(error_of(vec![fat_stem]).0, "obstacles[0].stem_radius");
 }
