@@ -242,26 +242,25 @@ fn open_fds() -> Option<i64> {
     i64::try_from(entries.count()).ok()
 }
 
-fn encode_gauge(
+/// Encode one constant metric (gauge or counter) under `name`.
+fn encode_const(
     encoder: &mut DescriptorEncoder,
     name: &str,
     help: &str,
-    value: ConstGauge<i64>,
+    metric: impl EncodeMetric,
 ) -> std::fmt::Result {
-    let metric = encoder.encode_descriptor(name, help, None, value.metric_type())?;
-    value.encode(metric)
+    let descriptor = encoder.encode_descriptor(name, help, None, metric.metric_type())?;
+    metric.encode(descriptor)
 }
 
 impl Collector for ProcessCollector {
     fn encode(&self, mut encoder: DescriptorEncoder) -> std::fmt::Result {
-        let start = ConstGauge::new(self.started_unix_s);
-        let metric = encoder.encode_descriptor(
+        encode_const(
+            &mut encoder,
             "process_start_time_seconds",
             "Start time of the process since the Unix epoch, in seconds",
-            None,
-            start.metric_type(),
+            ConstGauge::new(self.started_unix_s),
         )?;
-        start.encode(metric)?;
         let Some(stat) = std::fs::read_to_string("/proc/self/stat")
             .ok()
             .as_deref()
@@ -269,34 +268,30 @@ impl Collector for ProcessCollector {
         else {
             return Ok(());
         };
-        let cpu = ConstCounter::new(stat.cpu_seconds);
-        let metric = encoder.encode_descriptor(
+        let gauges = [
+            (
+                "process_resident_memory_bytes",
+                "Resident memory size in bytes",
+                stat.resident_bytes,
+            ),
+            (
+                "process_virtual_memory_bytes",
+                "Virtual memory size in bytes",
+                stat.virtual_bytes,
+            ),
+            ("process_threads", "Operating-system threads", stat.threads),
+        ];
+        encode_const(
+            &mut encoder,
             "process_cpu_seconds",
             "User and system CPU time spent, in seconds",
-            None,
-            cpu.metric_type(),
+            ConstCounter::new(stat.cpu_seconds),
         )?;
-        cpu.encode(metric)?;
-        encode_gauge(
-            &mut encoder,
-            "process_resident_memory_bytes",
-            "Resident memory size in bytes",
-            ConstGauge::new(stat.resident_bytes),
-        )?;
-        encode_gauge(
-            &mut encoder,
-            "process_virtual_memory_bytes",
-            "Virtual memory size in bytes",
-            ConstGauge::new(stat.virtual_bytes),
-        )?;
-        encode_gauge(
-            &mut encoder,
-            "process_threads",
-            "Operating-system threads",
-            ConstGauge::new(stat.threads),
-        )?;
+        for (name, help, value) in gauges {
+            encode_const(&mut encoder, name, help, ConstGauge::new(value))?;
+        }
         if let Some(fds) = open_fds() {
-            encode_gauge(
+            encode_const(
                 &mut encoder,
                 "process_open_fds",
                 "Open file descriptors",

@@ -107,19 +107,25 @@ fn assert_franka_feasible(req: &OptimizeRequest, resp: &OptimizeResponse, what: 
     assert!(resp.report.max_jerk_ratio.unwrap() <= 1.0 + 1e-6);
 }
 
+/// The optimiser's answer to `req`, asserted `optimal` (problem `seed`).
+fn optimal(req: &OptimizeRequest, robot: &Robot, seed: u64) -> OptimizeResponse {
+    let resp = optimize(req, robot).unwrap();
+    assert_eq!(
+        resp.status,
+        Status::Optimal,
+        "seed {seed}: {:?}",
+        resp.reason
+    );
+    resp
+}
+
 #[test]
 fn typical_problems_end_at_rest_within_franka_s_limits() {
     let robot = panda();
     for seed in 0..3 {
         let req = typical_request(&robot, seed, &ExampleSettings::default()).unwrap();
         assert_eq!(req.boundary, Boundary::Rest);
-        let resp = optimize(&req, &robot).unwrap();
-        assert_eq!(
-            resp.status,
-            Status::Optimal,
-            "seed {seed}: {:?}",
-            resp.reason
-        );
+        let resp = optimal(&req, &robot, seed);
         assert_franka_feasible(&req, &resp, &format!("seed {seed}"));
         // The same path with free ends does not stop: rest is the timing's.
         let free = OptimizeRequest {
@@ -189,13 +195,7 @@ fn the_gripper_ends_within_the_approach_tolerance() {
         let goal = req.goal.as_mut().unwrap();
         goal.approach_axis = Some([axis.x, axis.y, axis.z]);
         goal.approach_tolerance_rad = 0.1;
-        let resp = optimize(&req, &robot).unwrap();
-        assert_eq!(
-            resp.status,
-            Status::Optimal,
-            "seed {seed}: {:?}",
-            resp.reason
-        );
+        let resp = optimal(&req, &robot, seed);
         let end = final_gripper_axis(&req, &robot, &resp.weights);
         let angle = end.dot(&axis).clamp(-1.0, 1.0).acos();
         assert!(angle <= 0.1 + 1e-6, "seed {seed}: {angle} rad");
