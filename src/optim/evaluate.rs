@@ -8,7 +8,7 @@ use super::tolerances::{buffered_angle, buffered_tolerance};
 use super::tolerances::{CLEARANCE_BUFFER_M, FEASIBILITY_TOLERANCE, LINEAR_TOLERANCE};
 use crate::robot::Frames;
 use crate::scene::Clearance;
-use nalgebra::{DVector, Vector3};
+use nalgebra::{DVector, UnitQuaternion, Vector3};
 use rayon::prelude::*;
 
 /// Constraint values at one iterate on the optimisation phases.
@@ -115,11 +115,11 @@ impl Problem {
         }
         let goal = self.goal.as_ref().map(|g| {
             let q = self.ends.position(1, &w);
-            let p = self.robot.tcp_pose(&q).translation.vector;
-            let residual = p - Vector3::from(g.position);
+            let pose = self.robot.tcp_pose(&q);
+            let residual = pose.translation.vector - Vector3::from(g.position);
             let excess = (residual.norm() - g.tolerance_m).max(0.0);
             let buffered_excess = (residual.norm() - buffered_tolerance(g.tolerance_m)).max(0.0);
-            let approach = self.approach_eval(&q);
+            let approach = self.approach_eval(&q, &pose.rotation);
             GoalEval {
                 q,
                 residual,
@@ -144,11 +144,11 @@ impl Problem {
         }
     }
 
-    /// The approach constraint at final configuration `q`, if the goal has
-    /// an approach axis.
-    fn approach_eval(&self, q: &[f64]) -> Option<ApproachEval> {
+    /// The approach constraint at final configuration `q` (where the TCP's
+    /// orientation is `rotation`), if the goal has an approach axis.
+    fn approach_eval(&self, q: &[f64], rotation: &UnitQuaternion<f64>) -> Option<ApproachEval> {
         let (axis, tolerance) = self.approach()?;
-        let a = self.robot.tcp_pose(q).rotation * Vector3::z();
+        let a = rotation * Vector3::z();
         let jac = self.robot.tcp_jacobian(q);
         let gradient = (0..jac.ncols())
             .map(|j| {

@@ -32,7 +32,7 @@ impl Basis {
     pub fn new(config: &PrompConfig) -> Result<Basis> {
         config.validate()?;
         let t = config.n_samples;
-        let phases: Vec<f64> = (0..t).map(|k| k as f64 / (t - 1) as f64).collect();
+        let phases = phase_grid(t);
         let nb = config.n_basis;
         let mut matrix = DMatrix::zeros(t, nb);
         let mut derivative = DMatrix::zeros(t, nb);
@@ -122,6 +122,11 @@ impl Basis {
             ..self.config.clone()
         })
     }
+}
+
+/// `t` phases evenly spaced over [0, 1], both ends included (`t >= 2`).
+pub fn phase_grid(t: usize) -> Vec<f64> {
+    (0..t).map(|k| k as f64 / (t - 1) as f64).collect()
 }
 
 /// Normalised basis and its phase derivative at `z`.

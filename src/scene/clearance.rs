@@ -91,7 +91,7 @@ fn place_shape(robot: &Robot, frames: &Frames, index: usize) -> PlacedShape {
                 index,
                 bounds: Bounds::capsule(&a, &b, r),
                 core: Core::new(a, b, r),
-                part: RobotPart::placed(&s.geometry, pose),
+                part: RobotPart::convex(hull, pose),
             }
         }
         ShapeGeometry::Primitive(p) => {

@@ -8,7 +8,6 @@ use super::broadphase::{Bounds, Core};
 use super::obstacle::{BerryShape, ObstacleShape};
 use crate::geometry::{quaternion, Capsule, Primitive, Sphere};
 use crate::robot::hull::ConvexHull;
-use crate::robot::ShapeGeometry;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use parry3d::shape::{
     Ball, Capsule as ParryCapsule, ConvexPolyhedron, Cuboid, Cylinder, SharedShape,
@@ -223,15 +222,10 @@ pub enum RobotPart {
 }
 
 impl RobotPart {
-    /// Build from a link-frame shape and the link's pose; a hull keeps its
-    /// shared parry shape and only composes the pose.
-    pub fn placed(geometry: &ShapeGeometry, link_pose: &Isometry3<f64>) -> RobotPart {
-        match geometry {
-            ShapeGeometry::Convex(hull) => {
-                RobotPart::Convex(hull.clone(), *link_pose, link_pose * hull.frame())
-            }
-            ShapeGeometry::Primitive(p) => RobotPart::primitive(&p.transformed(link_pose)),
-        }
+    /// A mesh link's hull (shared; only the poses are composed) at the
+    /// link's pose.
+    pub fn convex(hull: &ConvexHull, link_pose: &Isometry3<f64>) -> RobotPart {
+        RobotPart::Convex(hull.clone(), *link_pose, link_pose * hull.frame())
     }
 
     /// Build from a base-frame primitive.

@@ -15,7 +15,8 @@ use crate::optim::phases::{PhaseRows, TimeWarp};
 use crate::optim::problem::Problem;
 use crate::optim::whiten::Whitening;
 use crate::promp::annotation::{prior_from_joints, REPAIR_FLOOR_RELATIVE};
-use crate::promp::{repair_covariance, Basis, WeightDistribution};
+use crate::promp::basis::phase_grid;
+use crate::promp::{repair_covariance, Basis, PrompConfig, WeightDistribution};
 use crate::robot::Robot;
 use crate::scene::Scene;
 use crate::{Error, Result};
@@ -47,10 +48,12 @@ impl OptimizeRequest {
         let timing = (self.duration_s, warp);
         let grid = PhaseRows::new(&basis, &whitening, robot.dof(), timing, basis.phases());
         let ends = PhaseRows::new(&basis, &whitening, robot.dof(), timing, &[0.0, 1.0]);
-        let dense_phases: Vec<f64> = basis
-            .resampled(self.promp.n_samples * self.options.verify_factor)?
-            .phases()
-            .to_vec();
+        let dense_config = PrompConfig {
+            n_samples: self.promp.n_samples * self.options.verify_factor,
+            ..self.promp.clone()
+        };
+        dense_config.validate()?;
+        let dense_phases = phase_grid(dense_config.n_samples);
         Ok(Problem {
             robot: robot.clone(),
             scene,
