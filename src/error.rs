@@ -39,6 +39,10 @@ pub enum Error {
     /// A numerical failure inside a solver or a factorisation.
     #[error("numerical failure: {0}")]
     Numerical(String),
+    /// A loaded model produced output that is not a valid prior (corrupt or
+    /// badly trained weights): the server's fault, not the request's.
+    #[error("model error: {0}")]
+    Model(String),
 }
 
 impl Error {
@@ -66,6 +70,7 @@ impl Error {
             Error::Infeasible(_) => "infeasible",
             Error::Cancelled(_) => "cancelled",
             Error::Numerical(_) => "numerical",
+            Error::Model(_) => "model_error",
         }
     }
 

@@ -27,9 +27,12 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
 }
 
 /// Read and parse a JSON file, naming the file (and serde's location) on
-/// error.
+/// error; duplicate keys are refused ([`crate::strict_json`]).
 pub fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
     let text = std::fs::read_to_string(path).map_err(|e| Error::file(path, e.to_string()))?;
+    if let Some(d) = crate::strict_json::find_duplicate_key(text.as_bytes()) {
+        return Err(Error::file(path, format!("{}: {d}", d.path)));
+    }
     serde_json::from_str(&text).map_err(|e| Error::file(path, format!("malformed JSON: {e}")))
 }
 

@@ -44,6 +44,7 @@
 //! - [`fixtures`] — generated typical optimiser requests for benchmarks,
 //!   tests and examples.
 //! - [`fsio`] — whole-or-nothing file writes, shared by every writer.
+//! - [`strict_json`] — duplicate object keys refused in every JSON input.
 //! - [`progress`] — progress bars on stderr for long work.
 //!
 //! ## Conventions
@@ -70,6 +71,7 @@ pub mod promp;
 pub mod robot;
 pub mod scene;
 pub mod service;
+pub mod strict_json;
 pub mod synth;
 pub mod train;
 

@@ -186,10 +186,12 @@ pub fn predict_and_optimize(
         model.predict_with_depth(&input.image, input.target_box, input.mask_applied, depth_m)?;
     let basis = Basis::new(&request.promp).map_err(|e| e.within("promp"))?;
     check_dimensions(&prediction.distribution, robot, &basis)?;
+    check_model_prior(model, &prediction.distribution, robot, &basis)?;
     let distribution = match &target {
         Some(report) => prior_towards_goal(&prediction.distribution, robot, &basis, report)?,
         None => prediction.distribution,
     };
+    check_model_prior(model, &distribution, robot, &basis)?;
     let prior = prior_trajectory(&distribution, &basis);
     request.prior = crate::optim::PriorSpec::from(&distribution);
     let result = optimize_with(&request, robot, ctl)?;
@@ -311,6 +313,24 @@ fn goal_from_target(robot: &Robot, target: Located, standoff: Option<f64>) -> Re
         source,
         goal: [goal.x, goal.y, goal.z],
         goal_tolerance_m: GOAL_TOLERANCE_M,
+    })
+}
+
+/// The network's (conditioned) prediction must be a prior the optimiser
+/// accepts; when it is not, the model is at fault (corrupt or badly trained
+/// weights), never the request: [`Error::Model`].
+fn check_model_prior(
+    model: &Model,
+    d: &WeightDistribution,
+    robot: &Robot,
+    basis: &Basis,
+) -> Result<()> {
+    let spec = crate::optim::PriorSpec::from(d);
+    crate::optim::request::check_prior(&spec, robot.dof(), basis.n_basis()).map_err(|e| {
+        Error::Model(format!(
+            "the model {:?} predicted an invalid prior ({e}); its weights may be corrupt",
+            model.name()
+        ))
     })
 }
 

@@ -45,6 +45,12 @@ pub fn run(args: OptimizeArgs) -> Result<()> {
 /// (exit code 2) naming the file and serde's location.
 pub fn read_request(path: &Path) -> Result<OptimizeRequest> {
     let text = std::fs::read_to_string(path).map_err(|e| Error::file(path, e.to_string()))?;
+    if let Some(d) = crate::strict_json::find_duplicate_key(text.as_bytes()) {
+        return Err(Error::invalid(
+            d.path.clone(),
+            format!("{}: malformed request: {d}", path.display()),
+        ));
+    }
     serde_json::from_str(&text).map_err(|e| {
         Error::invalid(
             "--request",

@@ -4,6 +4,9 @@
 //! dpmp serve [--addr 127.0.0.1:8080] [--model models/default] [--robot URDF --base LINK --tip LINK]
 //!            [--token-file FILE] [--body-limit-mib 16] [--max-pixels N] [--max-obstacles N]
 //!            [--max-samples N] [--deadline-ms 2000] [--concurrency N] [--queue N]
+//!            [--header-timeout-ms 10000] [--body-timeout-ms 30000]
+//!            [--max-connections 512] [--max-connections-per-ip 128]
+//!            [--drain-timeout-ms 5000] [--max-decoded-mib 512]
 //!            [--cors-origin URL]... [--log-json]
 //! ```
 //! The token may also come from `DPMP_API_TOKEN`; it is never logged.
@@ -55,6 +58,28 @@ pub struct ServeArgs {
     /// Requests allowed to wait for a solver before 429.
     #[arg(long)]
     pub queue: Option<usize>,
+    /// Time a client has to send a request's headers, also between
+    /// requests on a kept-alive connection (ms).
+    #[arg(long, default_value_t = 10_000)]
+    pub header_timeout_ms: u64,
+    /// Time a client has to send a request's body once the headers are in
+    /// (ms); slower → 408.
+    #[arg(long, default_value_t = 30_000)]
+    pub body_timeout_ms: u64,
+    /// Open connections at most (the oldest idle one gives way to a new
+    /// one; all busy → 503).
+    #[arg(long, default_value_t = 512)]
+    pub max_connections: usize,
+    /// Open connections from one IP address at most.
+    #[arg(long, default_value_t = 128)]
+    pub max_connections_per_ip: usize,
+    /// How long a shutdown waits for requests in flight before it closes
+    /// every connection (ms); a second SIGINT/SIGTERM exits at once.
+    #[arg(long, default_value_t = 5_000)]
+    pub drain_timeout_ms: u64,
+    /// Decoded image bytes held at once across requests (MiB).
+    #[arg(long, default_value_t = 512)]
+    pub max_decoded_mib: u64,
     /// Allow CORS from this origin (repeatable; CORS is off without it).
     #[arg(long = "cors-origin")]
     pub cors_origins: Vec<String>,
@@ -128,9 +153,21 @@ pub fn config_from_args(args: &ServeArgs) -> Result<ServiceConfig> {
         .checked_mul(1 << 20)
         .filter(|b| *b > 0 && args.body_limit_mib <= 1024)
         .ok_or_else(|| Error::invalid("--body-limit-mib", "must be in 1..=1024"))?;
-    if args.deadline_ms == 0 || args.deadline_ms > 3_600_000 {
-        return Err(Error::invalid("--deadline-ms", "must be in 1..=3600000"));
+    for (flag, ms) in [
+        ("--deadline-ms", args.deadline_ms),
+        ("--header-timeout-ms", args.header_timeout_ms),
+        ("--body-timeout-ms", args.body_timeout_ms),
+        ("--drain-timeout-ms", args.drain_timeout_ms),
+    ] {
+        if ms == 0 || ms > 3_600_000 {
+            return Err(Error::invalid(flag, "must be in 1..=3600000"));
+        }
     }
+    let max_decoded_bytes = args
+        .max_decoded_mib
+        .checked_mul(1 << 20)
+        .filter(|_| (1..=1 << 20).contains(&args.max_decoded_mib))
+        .ok_or_else(|| Error::invalid("--max-decoded-mib", "must be in 1..=1048576"))?;
     let config = ServiceConfig {
         addr,
         body_limit_bytes,
@@ -140,6 +177,12 @@ pub fn config_from_args(args: &ServeArgs) -> Result<ServiceConfig> {
         deadline: Duration::from_millis(args.deadline_ms),
         max_concurrency: args.concurrency.unwrap_or(defaults.max_concurrency),
         max_queue: args.queue.unwrap_or(defaults.max_queue),
+        header_read_timeout: Duration::from_millis(args.header_timeout_ms),
+        body_read_timeout: Duration::from_millis(args.body_timeout_ms),
+        max_connections: args.max_connections,
+        max_connections_per_ip: args.max_connections_per_ip,
+        drain_timeout: Duration::from_millis(args.drain_timeout_ms),
+        max_decoded_bytes,
         token: load_token(args.token_file.as_deref())?,
         cors_origins: args.cors_origins.clone(),
         ..defaults
@@ -220,6 +263,13 @@ mod tests {
             (vec!["--body-limit-mib", "0"], "--body-limit-mib"),
             (vec!["--deadline-ms", "0"], "--deadline-ms"),
             (vec!["--concurrency", "0"], "--max-concurrency"),
+            (vec!["--drain-timeout-ms", "0"], "--drain-timeout-ms"),
+            (vec!["--max-decoded-mib", "0"], "--max-decoded-mib"),
+            (vec!["--max-connections", "0"], "--max-connections"),
+            (
+                vec!["--max-connections", "4", "--max-connections-per-ip", "8"],
+                "--max-connections-per-ip",
+            ),
         ] {
             let e = config_from_args(&parse(&flags)).unwrap_err();
             assert_eq!(e.field(), Some(field), "{flags:?}");

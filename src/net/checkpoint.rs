@@ -3,7 +3,8 @@
 //! ([`ModelConfig`]). Both are written atomically (temp file + rename).
 //! Loading checks every tensor against the shapes the config implies and
 //! names the offending tensor on a missing, extra, wrong-shaped, wrong-type
-//! or non-finite entry; a corrupt file is a clear file error.
+//! or non-finite entry; a corrupt file is a clear file error, and weights
+//! that do not hash to the config's `weights_sha256` are refused.
 
 use super::config::ModelConfig;
 use super::models::Network;
@@ -24,6 +25,11 @@ pub use crate::fsio::write_atomic;
 
 /// Serialise named f32 tensors to a safetensors file, atomically.
 pub fn write_tensors(path: &Path, tensors: &[(String, Tensor)]) -> Result<()> {
+    write_atomic(path, &serialise_tensors(path, tensors)?)
+}
+
+/// The safetensors bytes of named f32 tensors (`path` names them in errors).
+fn serialise_tensors(path: &Path, tensors: &[(String, Tensor)]) -> Result<Vec<u8>> {
     let mut raw: Vec<(String, Vec<usize>, Vec<u8>)> = Vec::with_capacity(tensors.len());
     for (name, tensor) in tensors {
         let values: Vec<f32> = tensor
@@ -41,16 +47,29 @@ pub fn write_tensors(path: &Path, tensors: &[(String, Tensor)]) -> Result<()> {
                 .map_err(|e| Error::Numerical(format!("tensor {name}: {e}")))
         })
         .collect::<Result<Vec<_>>>()?;
-    let bytes = safetensors::tensor::serialize(views, None)
-        .map_err(|e| Error::file(path, format!("cannot serialise: {e}")))?;
-    write_atomic(path, &bytes)
+    safetensors::tensor::serialize(views, None)
+        .map_err(|e| Error::file(path, format!("cannot serialise: {e}")))
+}
+
+/// SHA-256 of `bytes`, lower-case hex.
+pub fn sha256_hex(bytes: &[u8]) -> String {
+    use sha2::Digest;
+    sha2::Sha256::digest(bytes)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
 }
 
 /// Read every tensor of a safetensors file as f32, checking the type and
 /// that every value is finite.
 pub fn read_tensors(path: &Path) -> Result<TensorMap> {
     let bytes = std::fs::read(path).map_err(|e| Error::file(path, e.to_string()))?;
-    let file = safetensors::SafeTensors::deserialize(&bytes)
+    parse_tensors(path, &bytes)
+}
+
+/// [`read_tensors`] of bytes already read from `path`.
+fn parse_tensors(path: &Path, bytes: &[u8]) -> Result<TensorMap> {
+    let file = safetensors::SafeTensors::deserialize(bytes)
         .map_err(|e| Error::file(path, format!("corrupt safetensors file: {e}")))?;
     let mut out = TensorMap::new();
     for (name, view) in file.tensors() {
@@ -79,15 +98,20 @@ pub fn read_tensors(path: &Path) -> Result<TensorMap> {
     Ok(out)
 }
 
-/// Save a network into `dir` (created if needed): weights, then config.
+/// Save a network into `dir` (created if needed): weights, then the config
+/// with the weights' SHA-256 (`weights_sha256`, checked at load).
 pub fn save(network: &Network, dir: &Path) -> Result<()> {
     let tensors: Vec<(String, Tensor)> = network
         .named_vars()
         .into_iter()
         .map(|(name, var)| (name, var.as_tensor().clone()))
         .collect();
-    write_tensors(&dir.join(WEIGHTS_FILE), &tensors)?;
-    let text = serde_json::to_string_pretty(network.config())
+    let path = dir.join(WEIGHTS_FILE);
+    let bytes = serialise_tensors(&path, &tensors)?;
+    write_atomic(&path, &bytes)?;
+    let mut config = network.config().clone();
+    config.weights_sha256 = Some(sha256_hex(&bytes));
+    let text = serde_json::to_string_pretty(&config)
         .map_err(|e| Error::Numerical(format!("cannot serialise config: {e}")))?;
     write_atomic(&dir.join(CONFIG_FILE), text.as_bytes())
 }
@@ -110,8 +134,33 @@ pub fn load(dir: &Path, device: &Device) -> Result<Network> {
     let network = Network::new(config, 0, device)
         .map_err(|e| Error::Numerical(format!("cannot build network: {e}")))?;
     let path = dir.join(WEIGHTS_FILE);
-    assign(&network, &read_tensors(&path)?, &path)?;
+    let bytes = std::fs::read(&path).map_err(|e| Error::file(&path, e.to_string()))?;
+    check_weights_checksum(network.config(), &path, &bytes)?;
+    assign(&network, &parse_tensors(&path, &bytes)?, &path)?;
     Ok(network)
+}
+
+/// The weights must hash to the config's `weights_sha256`: finite but
+/// corrupted weights (a flipped bit) load otherwise and predict garbage.
+/// A model saved before checksums were recorded loads with a warning.
+fn check_weights_checksum(config: &ModelConfig, path: &Path, bytes: &[u8]) -> Result<()> {
+    let Some(expected) = &config.weights_sha256 else {
+        tracing::warn!(
+            file = %path.display(),
+            "the model config records no weights_sha256: corruption of the weights cannot be detected"
+        );
+        return Ok(());
+    };
+    let found = sha256_hex(bytes);
+    if &found != expected {
+        return Err(Error::file(
+            path,
+            format!(
+                "the weights do not match the config's weights_sha256 (expected {expected}, found {found}): the file was changed or corrupted after training"
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// Copy `tensors` into the network's vars, requiring exactly the network's

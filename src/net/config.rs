@@ -201,6 +201,10 @@ pub struct ModelConfig {
     /// Configs without it were trained for the shipped Panda.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub robot: Option<crate::robot::RobotIdentity>,
+    /// SHA-256 (hex) of `model.safetensors`, written by the trainer and
+    /// checked at load; absent in models saved before it was recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub weights_sha256: Option<String>,
     /// Crate version that wrote the file.
     pub code_version: String,
     /// Training record, if trained.
@@ -229,6 +233,7 @@ impl ModelConfig {
             camera: None,
             depth_condition: false,
             robot: None,
+            weights_sha256: None,
             code_version: env!("CARGO_PKG_VERSION").to_string(),
             training: None,
         };

@@ -78,14 +78,16 @@ pub fn displacement_bound(
 impl Problem {
     /// Certify the trajectory with weight matrix `wm` (`n_basis × n_joints`)
     /// given its dense samples `q`, `qd` and per-sample clearances (`None`:
-    /// at least the activation distance).
+    /// at least the activation distance). `None` when `ctl` stopped it
+    /// (checked between intervals).
     pub(crate) fn continuous_certificate(
         &self,
         wm: &DMatrix<f64>,
         q: &DMatrix<f64>,
         qd: &DMatrix<f64>,
         clearance: &[Option<f64>],
-    ) -> Certificate {
+        ctl: &super::solution::SolveControl,
+    ) -> Option<Certificate> {
         let sample = |p: usize| Sample {
             z: self.dense_phases[p],
             q: q.row(p).iter().copied().collect(),
@@ -98,12 +100,15 @@ impl Problem {
             flagged: Vec::new(),
         };
         for p in 0..self.dense_phases.len().saturating_sub(1) {
+            if ctl.should_stop() {
+                return None;
+            }
             self.certify_interval(wm, sample(p), sample(p + 1), 0, &mut out);
         }
         if self.dense_phases.len() == 1 {
             out.clearance_m = sample(0).clearance;
         }
-        out
+        Some(out)
     }
 
     /// Bound the clearance between `a` and `b`, bisecting while the bound

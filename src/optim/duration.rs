@@ -1,215 +1,293 @@
-//! The shortest duration that the limits allow.
+//! How short a motion can be: a closed-form lower bound on the duration
+//! from the rate limits, and the proof of infeasibility it gives.
 //!
-//! A trajectory's `k`-th time derivative is `ψ⁽ᵏ⁾(z) w / Tᵏ`: stretching
-//! the same weights over a longer duration `T` divides every velocity,
-//! acceleration and jerk by `T`, `T²`, `T³`, and changes neither the path
-//! (positions, clearance, goal) nor the end conditions (a zero velocity
-//! stays zero). So if some weights meet the limits at `T`, the same weights
-//! meet them at every longer duration: feasibility of the *linear* part of
-//! the problem — position, velocity, acceleration and jerk limits, rest at
-//! the ends, start and final configuration, weight bounds — is monotone in
-//! `T`, and the shortest feasible duration is found by bisection.
+//! ## The bound
 //!
-//! Feasibility at one duration is decided by Clarabel (the solver of
-//! record): a QP towards the prior mean over the end conditions, with limit
-//! rows generated at the grid and dense verification phases until none is
-//! violated, or a certificate of primal infeasibility.
+//! Take any trajectory of joint `j` over `[0, T]` within the velocity
+//! limit `v`, the acceleration limit `a` and the jerk limit `J`, at rest
+//! (zero velocity and acceleration) at both ends when `boundary` is
+//! `rest`. From rest, the fastest the joint can be moving at time `t` is
+//!
+//! ```text
+//! f(t) = J t² / 2                 for t ≤ a / J,
+//!        a t − a² / (2 J)         after            (a·t alone without jerk limit)
+//! ```
+//!
+//! (the jerk held at `J` until the acceleration reaches `a`, then the
+//! acceleration held), and by symmetry no faster than `f(T − t)` if it must
+//! be at rest again at `T`. So `|q̇_j(t)| ≤ u_j(t) = min(v, f(t), f(T − t))`
+//! and the joint's path length is at most `S_j(T) = ∫₀ᵀ u_j(t) dt`, which
+//! grows with `T`. Every point of the robot, the TCP among them, moves at
+//! most `Σ_j L_j |q̇_j|` ([`crate::robot::Robot::lever_arms`]), so the TCP's
+//! path is at most `Σ_j L_j S_j(T)` long.
+//!
+//! A trajectory ending within `goal.tolerance_m` of the goal must move the
+//! TCP at least `D = |goal − tcp(start)| − tolerance_m`; one ending at
+//! `options.final_configuration` must move joint `j` at least
+//! `|q_final,j − q_start,j|`. When `T` cannot give that, **no** trajectory
+//! within the limits exists, whatever the obstacles, the prior or the
+//! solver: the request is answered `infeasible` at once, before any QP,
+//! with the shortest duration the bound allows (`duration_lower_bound_s`,
+//! rounded down to the millisecond). The integral is an upper Riemann sum
+//! on [`BOUND_CELLS`] cells of the monotone pieces of `u_j`, so the bound
+//! errs towards "possible", never towards a false proof.
+//!
+//! ## What it is not
+//!
+//! The bound ignores the path's shape (joint limits, obstacles, the
+//! kinematics between the joints' speeds and the TCP's), so a duration
+//! above it can still be infeasible. The duration a *verified* solve
+//! reached is a separate figure, `min_duration_s`, searched by
+//! [`crate::optim::optimize_with`] from the bound upwards
+//! ([`DURATION_SEARCH_GROWTH`]) within [`DURATION_SEARCH_BUDGET`] and the
+//! caller's deadline.
 
-use super::linear::{LinearSet, RowKind, RowRef};
-use super::phases::{Derivative, PhaseRows};
+use super::phases::Derivative;
 use super::problem::Problem;
-use super::qp::{Qp, QpFailure, QpSettings};
 use super::request::MAX_DURATION_S;
-use super::working_set::{thin_in_time, Candidate};
-use nalgebra::DVector;
+use std::time::Duration;
 
-/// Relative width of the final bisection bracket.
-pub const DURATION_RELATIVE_TOLERANCE: f64 = 1e-3;
+/// Cells of the upper Riemann sum of a joint's speed bound.
+pub const BOUND_CELLS: usize = 512;
 
-/// Relative margin added to the bisection's result: at the exact shortest
-/// duration the feasible set is a sliver that an iterative solver may miss;
-/// 1 % longer leaves every rate limit 1–3 % of room.
-pub const DURATION_MARGIN: f64 = 1e-2;
+/// Each duration the verified search tries is this factor times the last.
+pub const DURATION_SEARCH_GROWTH: f64 = 2.0;
 
-/// Rounds of row generation before a feasibility check gives up (counted
-/// as infeasible: the bisection then errs on the long, safe side).
-const MAX_GENERATION_ROUNDS: usize = 30;
+/// Wall-time budget of the verified-duration search (it also stops at the
+/// caller's deadline).
+pub const DURATION_SEARCH_BUDGET: Duration = Duration::from_millis(1000);
 
-/// Rows violated by less than this count as met (rad, rad/s, ...).
-const ROW_TOLERANCE: f64 = 1e-9;
+/// Relative width of the bisection that inverts the bound.
+const BISECTION_TOLERANCE: f64 = 1e-4;
 
-/// Why the duration is too short, and the shortest that works.
+/// The rate limits of one joint: velocity (always), acceleration and jerk
+/// (when limited), and whether it rests at both ends.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct JointRates {
+    /// Velocity limit (rad/s or m/s).
+    pub velocity: f64,
+    /// Acceleration limit, if any.
+    pub acceleration: Option<f64>,
+    /// Jerk limit, if any.
+    pub jerk: Option<f64>,
+    /// Zero velocity and acceleration at both ends.
+    pub rest: bool,
+}
+
+impl JointRates {
+    /// The fastest the joint can move `t` seconds after leaving rest.
+    fn speed_from_rest(&self, t: f64) -> f64 {
+        if !self.rest {
+            return f64::INFINITY;
+        }
+        match (self.acceleration, self.jerk) {
+            (None, None) => f64::INFINITY,
+            (Some(a), None) => a * t,
+            (None, Some(j)) => 0.5 * j * t * t,
+            (Some(a), Some(j)) => {
+                if t <= a / j {
+                    0.5 * j * t * t
+                } else {
+                    a * t - 0.5 * a * a / j
+                }
+            }
+        }
+    }
+
+    /// Upper bound on the joint's path length `∫|q̇|` over a motion of
+    /// `duration` seconds (see the module docs).
+    pub fn path_length_bound(&self, duration: f64) -> f64 {
+        if duration.is_nan() || duration <= 0.0 {
+            return 0.0;
+        }
+        let h = duration / BOUND_CELLS as f64;
+        (0..BOUND_CELLS)
+            .map(|k| {
+                let (t0, t1) = (k as f64 * h, (k + 1) as f64 * h);
+                // u is increasing in t through f(t) and decreasing through
+                // f(T − t): its cell maximum is at most this.
+                let up = self.speed_from_rest(t1);
+                let down = self.speed_from_rest(duration - t0);
+                self.velocity.min(up).min(down) * h
+            })
+            .sum()
+    }
+}
+
+/// The motion the request demands, which the limits must allow.
 #[derive(Clone, Debug, PartialEq)]
-pub struct DurationDiagnosis {
-    /// The limit that cannot hold, in words naming the request field.
+enum Demand {
+    /// The TCP must travel at least this far (m).
+    TcpTravel(f64),
+    /// Each joint must travel at least this far (rad).
+    JointTravel(Vec<f64>),
+}
+
+/// A proof that the requested duration is too short.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DurationProof {
+    /// Why, in words naming the request fields.
     pub reason: String,
-    /// The shortest feasible duration (s) plus [`DURATION_MARGIN`], rounded
-    /// up to the millisecond;
-    /// `None` when even [`MAX_DURATION_S`] is too short.
-    pub min_duration_s: Option<f64>,
+    /// The shortest duration the bound allows (s, rounded down to the
+    /// millisecond); `None` when even [`MAX_DURATION_S`] is too short.
+    pub lower_bound_s: Option<f64>,
 }
 
 impl Problem {
-    /// `Some` when the velocity, acceleration or jerk limits cannot hold
-    /// together with the end conditions over the requested duration (then
-    /// no trajectory is feasible, whatever the obstacles and the goal);
-    /// `None` when they can, or when the position limits and end conditions
-    /// alone are already incompatible (no duration helps).
-    pub fn duration_diagnosis(&self) -> Option<DurationDiagnosis> {
-        if self.linear_feasible(&self.linear, self.duration) {
+    /// Per joint, the rate limits of this request.
+    pub fn joint_rates(&self) -> Vec<JointRates> {
+        (0..self.robot.dof())
+            .map(|j| JointRates {
+                velocity: self.linear.velocity[j],
+                acceleration: self.linear.rate_bound(Derivative::Acceleration, j),
+                jerk: self.linear.rate_bound(Derivative::Jerk, j),
+                rest: self.linear.rest,
+            })
+            .collect()
+    }
+
+    /// `Some` when the rate limits prove that no trajectory of
+    /// `duration_s` seconds can make the motion the request demands (see
+    /// the module docs); microseconds, no QP.
+    pub fn duration_proof(&self) -> Option<DurationProof> {
+        let demand = self.demand()?;
+        if self.duration_allows(&demand, self.duration) {
             return None;
         }
-        let positions_only = LinearSet {
-            velocity: vec![f64::INFINITY; self.linear.velocity.len()],
-            acceleration: None,
-            jerk: None,
-            ..self.linear.clone()
+        let lower_bound_s = self.shortest_allowed(&demand);
+        let what = match &demand {
+            Demand::TcpTravel(d) => format!(
+                "the TCP must travel at least {d:.3} m from the start to within goal.tolerance_m of goal.position"
+            ),
+            Demand::JointTravel(_) => {
+                "the joints must travel from start to options.final_configuration".to_string()
+            }
         };
-        if !self.linear_feasible(&positions_only, MAX_DURATION_S) {
-            return None;
-        }
-        let reason = self.binding_limit();
-        let min_duration_s = self.shortest_duration();
-        Some(DurationDiagnosis {
-            reason: match min_duration_s {
-                Some(d) => format!(
-                    "duration_s: {reason} cannot hold over {:.3} s; the shortest feasible duration is {d:.3} s (min_duration_s)",
-                    self.duration
-                ),
-                None => format!(
-                    "duration_s: {reason} cannot hold even over {MAX_DURATION_S} s"
-                ),
-            },
-            min_duration_s,
+        let limits = "the velocity, acceleration and jerk limits (velocity_scaling, acceleration_limits, acceleration_scaling, jerk_limits)";
+        let reason = match lower_bound_s {
+            Some(lb) => format!(
+                "duration_s: {what}, which {limits} do not allow in {:.3} s; no duration below {lb:.3} s can work (duration_lower_bound_s)",
+                self.duration
+            ),
+            None => format!(
+                "duration_s: {what}, which {limits} do not allow even in {MAX_DURATION_S} s"
+            ),
+        };
+        Some(DurationProof {
+            reason,
+            lower_bound_s,
         })
     }
 
-    /// Which rate limit makes the requested duration infeasible, in words:
-    /// the first that is infeasible on its own, or all of them together.
-    fn binding_limit(&self) -> String {
-        let fields = [
-            (
-                Derivative::Velocity,
-                "the velocity limits (velocity_scaling)",
-            ),
-            (
-                Derivative::Acceleration,
-                "the acceleration limits (acceleration_limits, acceleration_scaling)",
-            ),
-            (Derivative::Jerk, "the jerk limits (jerk_limits)"),
-        ];
-        for (d, words) in fields {
-            if self.linear.rate_bound(d, 0).is_none() {
-                continue;
-            }
-            let only = self.only_rate_limit(d);
-            if !self.linear_feasible(&only, self.duration) {
-                return format!("{words} with the boundary conditions");
-            }
+    /// What the request makes the robot travel; `None` without a start (or
+    /// with nothing that must move).
+    fn demand(&self) -> Option<Demand> {
+        let start = self.linear.start.as_ref()?;
+        if let Some(end) = &self.linear.final_configuration {
+            let travel = start.iter().zip(end).map(|(a, b)| (b - a).abs()).collect();
+            return Some(Demand::JointTravel(travel));
         }
-        "the velocity, acceleration and jerk limits together".into()
+        let goal = self.goal.as_ref()?;
+        let tcp = self.robot.tcp_pose(start).translation.vector;
+        let d = (tcp - nalgebra::Vector3::from(goal.position)).norm() - goal.tolerance_m;
+        (d > 0.0).then_some(Demand::TcpTravel(d))
     }
 
-    /// The linear set with every rate limit but `d`'s lifted.
-    fn only_rate_limit(&self, d: Derivative) -> LinearSet {
-        let keep = |k: Derivative, v: Option<Vec<f64>>| if k == d { v } else { None };
-        LinearSet {
-            velocity: if d == Derivative::Velocity {
-                self.linear.velocity.clone()
-            } else {
-                vec![f64::INFINITY; self.linear.velocity.len()]
-            },
-            acceleration: keep(Derivative::Acceleration, self.linear.acceleration.clone()),
-            jerk: keep(Derivative::Jerk, self.linear.jerk.clone()),
-            ..self.linear.clone()
+    /// Whether `duration` lets the robot make `demand` within the limits.
+    fn duration_allows(&self, demand: &Demand, duration: f64) -> bool {
+        let rates = self.joint_rates();
+        match demand {
+            Demand::TcpTravel(d) => {
+                let reach: f64 = rates
+                    .iter()
+                    .zip(self.robot.lever_arms())
+                    .map(|(r, lever)| lever * r.path_length_bound(duration))
+                    .sum();
+                reach >= *d
+            }
+            Demand::JointTravel(travel) => rates
+                .iter()
+                .zip(travel)
+                .all(|(r, need)| r.path_length_bound(duration) >= *need),
         }
     }
 
-    /// Bisection over durations longer than the (infeasible) requested one.
-    fn shortest_duration(&self) -> Option<f64> {
-        let mut lo = self.duration;
-        let mut hi = (2.0 * lo).min(MAX_DURATION_S);
-        while !self.linear_feasible(&self.linear, hi) {
-            if hi >= MAX_DURATION_S {
-                return None;
-            }
-            lo = hi;
-            hi = (2.0 * hi).min(MAX_DURATION_S);
+    /// The smallest duration the bound allows for `demand` (bisection; the
+    /// bound is monotone in the duration), rounded down to the millisecond.
+    fn shortest_allowed(&self, demand: &Demand) -> Option<f64> {
+        if !self.duration_allows(demand, MAX_DURATION_S) {
+            return None;
         }
-        while hi - lo > DURATION_RELATIVE_TOLERANCE * hi {
+        let (mut lo, mut hi) = (self.duration, MAX_DURATION_S);
+        while hi - lo > BISECTION_TOLERANCE * hi {
             let mid = 0.5 * (lo + hi);
-            if self.linear_feasible(&self.linear, mid) {
+            if self.duration_allows(demand, mid) {
                 hi = mid;
             } else {
                 lo = mid;
             }
         }
-        Some((hi * (1.0 + DURATION_MARGIN) * 1000.0).ceil() / 1000.0)
+        Some((lo * 1000.0).floor() / 1000.0)
     }
+}
 
-    /// Whether some weights meet `set` over a motion of `duration` seconds
-    /// at the grid and the dense verification phases.
-    pub(crate) fn linear_feasible(&self, set: &LinearSet, duration: f64) -> bool {
-        let mut phases = self.basis.phases().to_vec();
-        phases.extend_from_slice(&self.dense_phases);
-        let n = self.robot.dof();
-        let timing = (duration, self.warp);
-        let rows = PhaseRows::new(&self.basis, &self.whitening, n, timing, &phases);
-        let ends = PhaseRows::new(&self.basis, &self.whitening, n, timing, &[0.0, 1.0]);
-        let mean = &self.prior.mean;
-        let mut qp = Qp::new(self.whitening.dim());
-        qp.equalities = set.equalities(&ends, mean);
-        qp.inequalities = set.weight_bounds(self.whitening.factor(), mean, self.prior.n_basis);
-        let mut added = std::collections::HashSet::<RowRef>::new();
-        for _ in 0..MAX_GENERATION_ROUNDS {
-            let z = match qp.solve(&QpSettings::default()) {
-                Ok(sol) => sol.z,
-                Err(QpFailure::Infeasible) => return false,
-                Err(_) => return false,
-            };
-            let w = self.whitening.weights(&z);
-            let violated: Vec<RowRef> = set
-                .violated(&rows, &w, ROW_TOLERANCE)
-                .into_iter()
-                .filter(|r| !added.contains(r))
-                .collect();
-            if violated.is_empty() {
-                return within_tolerance(set, &rows, &w);
-            }
-            for r in thinned(set, &rows, &w, &violated) {
-                added.insert(r);
-                qp.inequalities.push(set.inequality(&rows, mean, r));
-            }
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rates(acceleration: Option<f64>, jerk: Option<f64>) -> JointRates {
+        JointRates {
+            velocity: 2.0,
+            acceleration,
+            jerk,
+            rest: true,
         }
-        false
     }
-}
 
-/// The violated rows `violated` thinned in time ([`thin_in_time`]): the
-/// local maxima of each bound's violation, and a stride of the rest.
-fn thinned(
-    set: &LinearSet,
-    rows: &PhaseRows,
-    w: &DVector<f64>,
-    violated: &[RowRef],
-) -> Vec<RowRef> {
-    let candidates: Vec<Candidate<(usize, RowKind)>> = violated
-        .iter()
-        .map(|&r| Candidate {
-            key: (r.joint, r.kind),
-            phase: rows.phases()[r.phase],
-            score: set.excess(rows, w, r),
-            in_band: true,
-        })
-        .collect();
-    thin_in_time(&candidates)
-        .into_iter()
-        .map(|k| violated[k])
-        .collect()
-}
+    #[test]
+    fn path_length_matches_the_bang_bang_closed_forms() {
+        // Acceleration only, velocity never reached: a T² / 4.
+        let r = rates(Some(10.0), None);
+        let t = 0.5;
+        let exact = 10.0 * t * t / 4.0;
+        let bound = r.path_length_bound(t);
+        assert!(bound >= exact && bound <= exact * (1.0 + 5.0 / BOUND_CELLS as f64));
+        // Velocity reached: trapezoid v (T − v / a).
+        let t = 2.0;
+        let exact = 2.0 * (t - 2.0 / 10.0);
+        let bound = r.path_length_bound(t);
+        assert!(bound >= exact && bound <= exact * (1.0 + 5.0 / BOUND_CELLS as f64));
+        // Free ends: the velocity limit alone.
+        let free = JointRates { rest: false, ..r };
+        assert!((free.path_length_bound(t) - 2.0 * t).abs() < 1e-12);
+        // Jerk only, short motion: ∫ min(J t²/2, J (T−t)²/2) = J T³ / 24.
+        let r = rates(None, Some(1000.0));
+        let t = 0.1;
+        let exact = 1000.0 * t * t * t / 24.0;
+        let bound = r.path_length_bound(t);
+        assert!(bound >= exact && bound <= exact * (1.0 + 10.0 / BOUND_CELLS as f64));
+    }
 
-/// Every row of `set` met at `w` to the verifier's tolerance.
-fn within_tolerance(set: &LinearSet, rows: &PhaseRows, w: &DVector<f64>) -> bool {
-    set.violated(rows, w, super::tolerances::FEASIBILITY_TOLERANCE)
-        .is_empty()
+    #[test]
+    fn the_bound_dominates_a_fine_sum_of_its_speed_profile_and_grows_with_time() {
+        let r = rates(Some(7.5), Some(3750.0));
+        let mut last = 0.0;
+        for k in 1..60 {
+            let t = 0.02 * k as f64;
+            let fine: f64 = (0..100_000)
+                .map(|i| {
+                    let s = (i as f64 + 0.5) * t / 100_000.0;
+                    r.velocity
+                        .min(r.speed_from_rest(s))
+                        .min(r.speed_from_rest(t - s))
+                        * t
+                        / 100_000.0
+                })
+                .sum();
+            let b = r.path_length_bound(t);
+            assert!(b >= fine - 1e-12, "{t}: {b} < {fine}");
+            assert!(b >= last);
+            last = b;
+        }
+    }
 }

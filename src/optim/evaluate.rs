@@ -4,12 +4,14 @@
 
 use super::phases::PhaseRows;
 use super::problem::Problem;
+use super::solution::SolveControl;
 use super::tolerances::{buffered_angle, buffered_tolerance};
 use super::tolerances::{CLEARANCE_BUFFER_M, FEASIBILITY_TOLERANCE, LINEAR_TOLERANCE};
 use crate::robot::Frames;
 use crate::scene::Clearance;
 use nalgebra::{DVector, UnitQuaternion, Vector3};
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Constraint values at one iterate on the optimisation phases.
 pub(super) struct GridEval {
@@ -24,6 +26,9 @@ pub(super) struct GridEval {
     pub(super) true_violation: f64,
     pub(super) goal: Option<GoalEval>,
     pub(super) linear_ok: bool,
+    /// The caller's deadline or cancel flag stopped the clearance pass:
+    /// the pairs are incomplete, so the iterate is never accepted.
+    pub(super) interrupted: bool,
 }
 
 pub(super) struct PhasePairs {
@@ -72,26 +77,34 @@ impl GridEval {
     }
 
     pub(super) fn feasible(&self) -> bool {
-        self.linear_ok && self.true_violation <= FEASIBILITY_TOLERANCE
+        !self.interrupted && self.linear_ok && self.true_violation <= FEASIBILITY_TOLERANCE
     }
 }
 
 impl Problem {
-    /// Evaluate constraints at `z` on the optimisation phases.
+    /// Evaluate constraints at `z` on the optimisation phases; a stop by
+    /// `ctl` skips the phases not yet evaluated and marks the result
+    /// [`GridEval::interrupted`].
     pub(super) fn evaluate_grid(
         &self,
         rows: &PhaseRows,
         z: DVector<f64>,
         centre: &DVector<f64>,
+        ctl: &SolveControl,
     ) -> GridEval {
         let w = self.whitening.weights(&z);
         let target = self.clearance_m + CLEARANCE_BUFFER_M;
+        let interrupted = AtomicBool::new(false);
         let pairs: Vec<PhasePairs> = if self.scene.is_empty() {
             Vec::new()
         } else {
             (0..rows.len())
                 .into_par_iter()
                 .filter_map(|p| {
+                    if ctl.should_stop() {
+                        interrupted.store(true, Ordering::Relaxed);
+                        return None;
+                    }
                     let q = rows.position(p, &w);
                     let frames = self.robot.fk(&q);
                     let list =
@@ -141,6 +154,7 @@ impl Problem {
             true_violation: truth + goal_excess,
             goal,
             linear_ok,
+            interrupted: interrupted.into_inner(),
         }
     }
 

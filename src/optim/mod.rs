@@ -10,7 +10,7 @@
 //! - [`whiten`] — `Σ + λI = L Lᵀ`, `w = μ + L z`: cost `|z|²`.
 //! - [`phases`] — joint positions and their time derivatives as rows in `z` per phase.
 //! - [`linear`] — limit rows (position to jerk), end conditions, opt-in weight bounds.
-//! - [`duration`] — the shortest feasible duration when the limits make a request infeasible.
+//! - [`duration`] — the closed-form duration bound from the rate limits: a proof that a request is too short.
 //! - [`qp`] — one QP in Clarabel (CSC built directly).
 //! - [`dual_active_set`] — the warm-started inner QP solver (Goldfarb–Idnani).
 //! - [`qp_active_set`] — a [`qp::Qp`] solved by it (the SCP's intermediate steps).
@@ -66,60 +66,114 @@ pub use tolerances::FEASIBILITY_TOLERANCE;
 
 use crate::robot::Robot;
 use crate::Result;
+use std::time::Instant;
 
 /// Validate, diagnose, solve and verify one request.
 pub fn optimize(request: &OptimizeRequest, robot: &Robot) -> Result<OptimizeResponse> {
     optimize_with(request, robot, &SolveControl::default())
 }
 
-/// [`optimize`] with a deadline / cancel flag: a stopped solve answers
-/// status `max_iterations` with a warning.
+/// [`optimize`] with a deadline / cancel flag, which bound all of the
+/// request's work (validation aside): the prior mean's verification, the
+/// solve with its restarts, the duration search and the samples. A stopped
+/// solve answers status `max_iterations` with a warning. `report.solve_ms`
+/// is the whole call's wall time.
 pub fn optimize_with(
     request: &OptimizeRequest,
     robot: &Robot,
     ctl: &SolveControl,
 ) -> Result<OptimizeResponse> {
+    let started = Instant::now();
     let problem = request.validate(robot)?;
     let mean = problem.prior().mean.as_slice().to_vec();
-    let mut prior_mean_report = problem.evaluate(&mean);
-    prior_mean_report.warnings = problem.warnings().to_vec();
-    if let Some(reason) = problem.diagnose() {
-        return Ok(OptimizeResponse {
-            status: Status::Infeasible,
-            mahalanobis: 0.0,
-            trajectory: problem.trajectory(&mean),
-            report: prior_mean_report.clone(),
-            prior_mean_report,
-            weights: mean,
-            samples: Vec::new(),
-            reason: Some(reason),
-            min_duration_s: None,
-        });
-    }
-    let mut solution = problem.solve(ctl)?;
-    let mut min_duration_s = None;
-    // A stopped solve (deadline, cancel) answers at once, undiagnosed.
-    if solution.status != Status::Optimal && ctl.stop_reason().is_none() {
-        if let Some(d) = problem.duration_diagnosis() {
-            solution.status = Status::Infeasible;
-            solution.reason = Some(d.reason);
-            min_duration_s = d.min_duration_s;
-        }
-    }
-    let samples = if problem.extra_samples() > 0 {
-        problem.feasible_samples(problem.extra_samples(), ctl)?
+    let mut prior_mean_report = problem.evaluate_with(&mean, ctl);
+    let mut warnings = problem.warnings().to_vec();
+    warnings.append(&mut prior_mean_report.warnings);
+    prior_mean_report.warnings = warnings;
+    let mut response = if let Some(reason) = problem.diagnose() {
+        infeasible_at_prior_mean(&problem, mean, prior_mean_report, reason)
+    } else if let Some(proof) = problem.duration_proof() {
+        let mut r = infeasible_at_prior_mean(&problem, mean, prior_mean_report, proof.reason);
+        r.duration_lower_bound_s = proof.lower_bound_s;
+        r.min_duration_s = verified_duration(request, robot, proof.lower_bound_s, ctl);
+        r
     } else {
-        Vec::new()
+        let solution = problem.solve(ctl)?;
+        let samples = if problem.extra_samples() > 0 {
+            problem.feasible_samples(problem.extra_samples(), ctl)?
+        } else {
+            Vec::new()
+        };
+        OptimizeResponse {
+            status: solution.status,
+            trajectory: problem.trajectory(&solution.weights),
+            mahalanobis: solution.mahalanobis,
+            weights: solution.weights,
+            report: solution.report,
+            prior_mean_report,
+            samples,
+            reason: solution.reason,
+            min_duration_s: None,
+            duration_lower_bound_s: None,
+        }
     };
-    Ok(OptimizeResponse {
-        status: solution.status,
-        trajectory: problem.trajectory(&solution.weights),
-        mahalanobis: solution.mahalanobis,
-        weights: solution.weights,
-        report: solution.report,
+    response.report.solve_ms = started.elapsed().as_secs_f64() * 1e3;
+    Ok(response)
+}
+
+/// The answer for a request proven infeasible before any solve: the prior
+/// mean, its report, and why.
+fn infeasible_at_prior_mean(
+    problem: &Problem,
+    mean: Vec<f64>,
+    prior_mean_report: TrajectoryReport,
+    reason: String,
+) -> OptimizeResponse {
+    OptimizeResponse {
+        status: Status::Infeasible,
+        mahalanobis: 0.0,
+        trajectory: problem.trajectory(&mean),
+        report: prior_mean_report.clone(),
         prior_mean_report,
-        samples,
-        reason: solution.reason,
-        min_duration_s,
-    })
+        weights: mean,
+        samples: Vec::new(),
+        reason: Some(reason),
+        min_duration_s: None,
+        duration_lower_bound_s: None,
+    }
+}
+
+/// The first duration, from the proven lower bound up by
+/// [`duration::DURATION_SEARCH_GROWTH`] each try, at which a verified
+/// solve of `request` (without its extra samples) reaches `optimal`;
+/// `None` when none does within [`duration::DURATION_SEARCH_BUDGET`], the
+/// caller's deadline or [`request::MAX_DURATION_S`]. The solve is
+/// deterministic, so the same request at the returned duration answers
+/// `optimal` again.
+fn verified_duration(
+    request: &OptimizeRequest,
+    robot: &Robot,
+    lower_bound: Option<f64>,
+    ctl: &SolveControl,
+) -> Option<f64> {
+    let budget_end = Instant::now() + duration::DURATION_SEARCH_BUDGET;
+    let search = SolveControl {
+        deadline: Some(ctl.deadline.map_or(budget_end, |d| d.min(budget_end))),
+        cancel: ctl.cancel.clone(),
+    };
+    let mut duration = lower_bound? * duration::DURATION_SEARCH_GROWTH;
+    while duration <= request::MAX_DURATION_S && !search.should_stop() {
+        let mut at = request.clone();
+        at.duration_s = (duration * 1000.0).ceil() / 1000.0;
+        at.samples = 0;
+        let problem = at.validate(robot).ok()?;
+        if problem.diagnose().is_none() && problem.duration_proof().is_none() {
+            let solution = problem.solve(&search).ok()?;
+            if solution.status == Status::Optimal {
+                return Some(at.duration_s);
+            }
+        }
+        duration *= duration::DURATION_SEARCH_GROWTH;
+    }
+    None
 }

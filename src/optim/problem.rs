@@ -112,7 +112,11 @@ impl Problem {
             (None, _) => true,
         };
         let ratio_ok = |r: Option<f64>| r.is_none_or(|r| r <= 1.0 + tol);
-        clear_ok
+        // An interrupted verification has no clearance figures: never feasible.
+        let clearance_checked = self.scene.is_empty()
+            || (report.min_clearance_m.is_some() && report.continuous_clearance_m.is_some());
+        clearance_checked
+            && clear_ok
             && goal_ok
             && approach_ok
             && report.max_joint_limit_violation_rad <= tol

@@ -326,12 +326,19 @@ pub struct OptimizeResponse {
     /// Why the status is not `optimal`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub reason: Option<String>,
-    /// With status `infeasible` because the velocity, acceleration or jerk
-    /// limits cannot hold over `duration_s`: the shortest duration (s) for
-    /// which they, the boundary conditions and the start / final
-    /// configuration can all hold.
+    /// With status `infeasible` because `duration_s` is too short: a
+    /// duration (s) at which a verified solve of this same request reached
+    /// `optimal` (searched upwards from `duration_lower_bound_s` within a
+    /// budget and the deadline; not necessarily the shortest). Absent when
+    /// the search found none in time.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub min_duration_s: Option<f64>,
+    /// With status `infeasible` because `duration_s` is too short: a proven
+    /// lower bound (s) on any feasible duration, from the velocity,
+    /// acceleration and jerk limits and the distance the motion must cover
+    /// ([`super::duration`]); durations above it may still be infeasible.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub duration_lower_bound_s: Option<f64>,
 }
 
 impl OptimizeResponse {

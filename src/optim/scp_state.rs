@@ -92,7 +92,7 @@ impl<'a> Scp<'a> {
         let rows = problem.grid.clone();
         let mut stats = SolveStats::default();
         let eval = timed(&mut stats.evaluation_ms, || {
-            problem.evaluate_grid(&rows, start.clone(), centre)
+            problem.evaluate_grid(&rows, start.clone(), centre, ctl)
         });
         Scp {
             problem,
@@ -155,7 +155,13 @@ impl<'a> Scp<'a> {
             return None;
         };
         let p = self.problem;
-        let v = timed(&mut self.stats.verification_ms, || p.verify(&self.eval.w));
+        let ctl = self.ctl;
+        let v = timed(&mut self.stats.verification_ms, || {
+            p.verify(&self.eval.w, ctl)
+        });
+        if let Some(why) = v.interrupted {
+            return Some(self.stopped_early(format!("solver stopped early: {why}"), Some(v)));
+        }
         if v.flagged.is_empty() && p.is_feasible(&v.report) {
             self.stats.final_penalty = self.rho;
             let mut sol = self.answer(Status::Optimal, Some(v), None, &[]);
@@ -170,7 +176,7 @@ impl<'a> Scp<'a> {
         }
         let z = self.eval.z.clone();
         self.eval = timed(&mut self.stats.evaluation_ms, || {
-            p.evaluate_grid(&self.rows, z, self.centre)
+            p.evaluate_grid(&self.rows, z, self.centre, ctl)
         });
         self.converged = false;
         self.certified = None;
@@ -180,7 +186,7 @@ impl<'a> Scp<'a> {
     /// Step 2: the caller's deadline / cancel flag and the iteration limit.
     fn out_of_budget(&mut self) -> Flow {
         if let Some(why) = self.ctl.stop_reason() {
-            return Some(self.stopped_early(format!("solver stopped early: {why}")));
+            return Some(self.stopped_early(format!("solver stopped early: {why}"), None));
         }
         if self.stats.iterations >= self.max_iterations {
             let reason = format!(
@@ -227,7 +233,7 @@ impl<'a> Scp<'a> {
                 )))
             }
             Err(QpFailure::OutOfTime) => Err(Box::new(
-                self.stopped_early("solver stopped early: deadline reached".into()),
+                self.stopped_early("solver stopped early: deadline reached".into(), None),
             )),
             Err(QpFailure::Numerical(what)) => {
                 let reason = format!("QP solver failed ({what}); best iterate returned");
@@ -253,6 +259,7 @@ impl<'a> Scp<'a> {
             centre: self.centre,
             rho: self.rho,
             predicted: step.model_here - step.sol.objective,
+            ctl: self.ctl,
         };
         let full_step = (&step.sol.z - &self.eval.z).norm();
         if step.sol.clarabel.is_some() {
@@ -380,9 +387,12 @@ impl<'a> Scp<'a> {
 
     /// Finish as `max_iterations` because the caller stopped the solver;
     /// the reason is also a warning.
-    fn stopped_early(&mut self, warn: String) -> Solution {
+    /// A dense verification interrupted by the stop is its report; without
+    /// one, the answer's verification stops at once too, so a stopped run
+    /// costs only the matrix products of the limit figures.
+    fn stopped_early(&mut self, warn: String, verification: Option<Verification>) -> Solution {
         let warnings = [warn.clone()];
-        self.answer(Status::MaxIterations, None, Some(warn), &warnings)
+        self.answer(Status::MaxIterations, verification, Some(warn), &warnings)
     }
 
     /// The run's answer at the current iterate.
@@ -401,6 +411,7 @@ impl<'a> Scp<'a> {
             std::mem::take(&mut self.stats),
             self.started,
             extra_warnings,
+            self.ctl,
         )
     }
 }
@@ -424,6 +435,8 @@ struct StepTrial<'a> {
     rho: f64,
     /// The model's predicted merit decrease for the whole step.
     predicted: f64,
+    /// The caller's stop: an interrupted trial is never accepted.
+    ctl: &'a SolveControl,
 }
 
 impl Problem {
@@ -447,6 +460,7 @@ impl Problem {
             centre,
             rho,
             predicted,
+            ctl,
         } = *trial;
         let scale = 1.0 + merit_here.abs();
         // Halving keeps the hard (linear) rows only from a point satisfying them.
@@ -464,8 +478,11 @@ impl Problem {
                 &eval.z + (target - &eval.z) * alpha
             };
             let next = timed(&mut stats.evaluation_ms, || {
-                self.evaluate_grid(rows, z, centre)
+                self.evaluate_grid(rows, z, centre, ctl)
             });
+            if next.interrupted {
+                return (None, alpha);
+            }
             let predicted = alpha * predicted;
             let actual = merit_here - next.merit(rho);
             if !eval.linear_ok || actual >= 0.1 * predicted.max(0.0) - 1e-12 * scale {
@@ -495,8 +512,9 @@ impl Problem {
         stats: SolveStats,
         started: Instant,
         extra_warnings: &[String],
+        ctl: &SolveControl,
     ) -> Solution {
-        let v = verification.unwrap_or_else(|| self.verify(&eval.w));
+        let v = verification.unwrap_or_else(|| self.verify(&eval.w, ctl));
         let mut report = v.report;
         report.iterations = stats.iterations;
         report.warnings = self.warnings.clone();

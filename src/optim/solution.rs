@@ -35,6 +35,12 @@ impl SolveControl {
         None
     }
 
+    /// Whether the solve must stop now (cheap: one atomic load and, with a
+    /// deadline, one clock read; checked once per phase in the long loops).
+    pub fn should_stop(&self) -> bool {
+        self.stop_reason().is_some()
+    }
+
     pub(super) fn seconds_left(&self) -> Option<f64> {
         self.deadline
             .map(|d| d.saturating_duration_since(Instant::now()).as_secs_f64())

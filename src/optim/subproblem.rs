@@ -492,7 +492,7 @@ mod tests {
             let centre = DVector::zeros(p.whitening.dim());
             // Linearise at a point off the prior mean (inside the limits).
             let z0 = DVector::from_fn(p.whitening.dim(), |i, _| 0.05 * ((i % 5) as f64 - 2.0));
-            let eval = p.evaluate_grid(&p.grid, z0, &centre);
+            let eval = p.evaluate_grid(&p.grid, z0, &centre, &SolveControl::default());
             assert!(!eval.pairs.is_empty(), "seed {seed}: no clearance pair");
             let at = Linearisation {
                 exact: true,

@@ -10,6 +10,7 @@ use super::problem::Problem;
 use super::report::{
     Closest, JointTrajectory, TrajectoryFormat, TrajectoryPoint, TrajectoryReport,
 };
+use super::solution::SolveControl;
 use super::tolerances::FEASIBILITY_TOLERANCE;
 use crate::scene::Clearance;
 use nalgebra::{DMatrix, DVector};
@@ -22,6 +23,10 @@ pub struct Verification {
     pub report: TrajectoryReport,
     /// Dense phases with a violated limit, velocity or clearance.
     pub flagged: Vec<f64>,
+    /// Why the clearance part was not finished (the caller's deadline or
+    /// cancel flag): the report then has no clearance figures, a warning
+    /// says so, and it is never feasible.
+    pub interrupted: Option<&'static str>,
 }
 
 impl Problem {
@@ -34,11 +39,21 @@ impl Problem {
     /// Dense verification of any candidate weights (length must be the
     /// prior's dimension; other lengths give an all-violated report).
     pub fn evaluate(&self, weights: &[f64]) -> TrajectoryReport {
-        self.verify(&DVector::from_column_slice(weights)).report
+        self.evaluate_with(weights, &SolveControl::default())
     }
 
-    /// Dense verification with the violated phases.
-    pub fn verify(&self, w: &DVector<f64>) -> Verification {
+    /// [`Problem::evaluate`] that stops at `ctl`'s deadline or cancel flag
+    /// (see [`Verification::interrupted`]).
+    pub fn evaluate_with(&self, weights: &[f64], ctl: &SolveControl) -> TrajectoryReport {
+        self.verify(&DVector::from_column_slice(weights), ctl)
+            .report
+    }
+
+    /// Dense verification with the violated phases. The limit, rate and
+    /// goal figures are matrix products and always computed; the clearance
+    /// part (forward kinematics and distances at every dense phase, then the
+    /// continuous certificate) checks `ctl` as it goes and stops with it.
+    pub fn verify(&self, w: &DVector<f64>, ctl: &SolveControl) -> Verification {
         if w.len() != self.prior.dim() || w.iter().any(|v| !v.is_finite()) {
             return Verification {
                 report: TrajectoryReport {
@@ -48,6 +63,7 @@ impl Problem {
                     ..Default::default()
                 },
                 flagged: Vec::new(),
+                interrupted: None,
             };
         }
         let wm = self.weight_matrix(w);
@@ -64,10 +80,20 @@ impl Problem {
         };
         let acceleration_ratio = limited_ratio(Derivative::Acceleration);
         let jerk_ratio = limited_ratio(Derivative::Jerk);
-        let (min_clearance, closest, per_phase) = self.dense_clearance(&q, &mut flagged);
-        let certificate =
-            min_clearance.map(|_| self.continuous_certificate(&wm, &q, &qd, &per_phase));
-        let report = TrajectoryReport {
+        let dense = self.dense_clearance(&q, &mut flagged, ctl);
+        let certificate = match &dense {
+            Some((Some(_), _, per_phase)) => {
+                self.continuous_certificate(&wm, &q, &qd, per_phase, ctl)
+            }
+            _ => None,
+        };
+        let interrupted = match (&dense, &certificate) {
+            (None, _) => ctl.stop_reason(),
+            (Some((Some(_), ..)), None) => ctl.stop_reason(),
+            _ => None,
+        };
+        let (min_clearance, closest, _) = dense.unwrap_or((None, None, Vec::new()));
+        let mut report = TrajectoryReport {
             min_clearance_m: min_clearance,
             closest,
             continuous_clearance_m: certificate.as_ref().map(|c| c.clearance_m),
@@ -78,7 +104,11 @@ impl Problem {
             max_jerk_ratio: jerk_ratio,
             goal_error_m: self.goal_error(w),
             goal_angle_error_rad: self.goal_angle_error(w),
-            verified_samples: self.dense_phases.len(),
+            verified_samples: if interrupted.is_some() {
+                0
+            } else {
+                self.dense_phases.len()
+            },
             equality_error_rad: self.linear.equality_error(&self.ends, w),
             weight_bound_excess: self
                 .linear
@@ -96,7 +126,21 @@ impl Problem {
             flagged.extend(c.flagged);
             flagged.sort_by(f64::total_cmp);
         }
-        Verification { report, flagged }
+        if let Some(why) = interrupted {
+            report.min_clearance_m = None;
+            report.closest = None;
+            report.continuous_clearance_m = None;
+            report.continuous_margin_m = None;
+            report.warnings.push(format!(
+                "clearance not verified: dense verification stopped ({why})"
+            ));
+            flagged.clear();
+        }
+        Verification {
+            report,
+            flagged,
+            interrupted,
+        }
     }
 
     fn limit_violation(&self, q: &DMatrix<f64>, flagged: &mut [bool]) -> f64 {
@@ -142,35 +186,31 @@ impl Problem {
     /// Closest pair per dense phase (pairs within the activation distance
     /// via the broad phase; the exact minimum when nothing is that close):
     /// the minimum, where it occurs, and each phase's distance (`None`: at
-    /// least the activation distance).
+    /// least the activation distance). `None` when `ctl` stopped it.
     fn dense_clearance(
         &self,
         q: &DMatrix<f64>,
         flagged: &mut [bool],
-    ) -> (Option<f64>, Option<Closest>, Vec<Option<f64>>) {
+        ctl: &SolveControl,
+    ) -> Option<DenseClearance> {
         if self.scene.is_empty() {
-            return (None, None, Vec::new());
+            return Some((None, None, Vec::new()));
         }
         let rows: Vec<Vec<f64>> = (0..q.nrows())
             .map(|p| q.row(p).iter().cloned().collect())
             .collect();
-        let near: Vec<Option<Clearance>> = rows
-            .par_iter()
-            .map(|qp| {
-                let frames = self.robot.fk(qp);
-                self.scene
-                    .closest_within(&self.robot, &frames, self.activation_m)
-            })
-            .collect();
+        let near: Vec<Option<Clearance>> = per_row_unless_stopped(&rows, ctl, |qp| {
+            let frames = self.robot.fk(qp);
+            self.scene
+                .closest_within(&self.robot, &frames, self.activation_m)
+        })?;
         let per_phase: Vec<Option<Clearance>> = if near.iter().any(|c| c.is_some()) {
             near
         } else {
-            rows.par_iter()
-                .map(|qp| {
-                    let frames = self.robot.fk(qp);
-                    self.scene.min_clearance(&self.robot, &frames)
-                })
-                .collect()
+            per_row_unless_stopped(&rows, ctl, |qp| {
+                let frames = self.robot.fk(qp);
+                self.scene.min_clearance(&self.robot, &frames)
+            })?
         };
         let mut best: Option<(usize, &Clearance)> = None;
         for (p, c) in per_phase.iter().enumerate() {
@@ -187,7 +227,7 @@ impl Problem {
             .iter()
             .map(|c| c.as_ref().map(|c| c.distance))
             .collect();
-        match best {
+        Some(match best {
             None => (None, None, distances),
             Some((p, c)) => (
                 Some(c.distance),
@@ -198,7 +238,7 @@ impl Problem {
                 }),
                 distances,
             ),
-        }
+        })
     }
 
     /// TCP distance to the goal at phase 1.
@@ -251,4 +291,30 @@ impl Problem {
             format: self.trajectory_format,
         }
     }
+}
+
+/// The closest distance, where it occurs, and each dense phase's distance.
+type DenseClearance = (Option<f64>, Option<Closest>, Vec<Option<f64>>);
+
+/// `f` of every row in parallel, or `None` once `ctl` says stop (the rows
+/// not yet started are skipped, so a stop takes effect within one row).
+pub(crate) fn per_row_unless_stopped<R, T, F>(
+    rows: &[R],
+    ctl: &SolveControl,
+    f: F,
+) -> Option<Vec<T>>
+where
+    R: Sync,
+    T: Send,
+    F: Fn(&R) -> T + Sync,
+{
+    rows.par_iter()
+        .map(|row| {
+            if ctl.should_stop() {
+                None
+            } else {
+                Some(f(row))
+            }
+        })
+        .collect()
 }

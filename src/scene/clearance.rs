@@ -106,6 +106,10 @@ fn place_shape(robot: &Robot, frames: &Frames, index: usize) -> PlacedShape {
     }
 }
 
+/// Prediction beyond the first estimate with which the seed pair is
+/// measured again when its obstacle is long (m).
+const RESEED_MARGIN_M: f64 = 0.05;
+
 /// Whether a lower bound `gap` rules out a distance below `limit`: when
 /// `gap >= limit` and the shapes do not touch (a penetration can be deeper
 /// than any negative limit only while the bounds overlap).
@@ -277,7 +281,15 @@ impl Scene {
             }
         }
         let far = seed.2 + self.bounds_diameter() + 1.0;
-        let first = obstacle_contact(&placed[seed.0], &self.compiled[seed.1], far)?;
+        let mut first = obstacle_contact(&placed[seed.0], &self.compiled[seed.1], far)?;
+        if self.compiled[seed.1].parts.iter().any(|p| p.long.is_some()) {
+            // At the first, scene-sized prediction a long part is hardly cut
+            // ([`super::clip`]): measure the seed pair again near its result.
+            let near = first.distance.max(0.0) + RESEED_MARGIN_M;
+            if let Some(again) = obstacle_contact(&placed[seed.0], &self.compiled[seed.1], near) {
+                first = again;
+            }
+        }
         let mut best = (placed[seed.0].index, seed.1, first);
         let all = self.bounds?;
         for (s, shape) in placed.iter().enumerate() {

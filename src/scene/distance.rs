@@ -2,6 +2,7 @@
 //! witness points and normal, from parry3d's `query::contact` (GJK when
 //! apart, EPA when penetrating).
 
+use super::clip::{near_piece, Cut};
 use super::shape::{from_glam, parry_pose_relative, to_glam, Part, RobotPart};
 use crate::robot::hull::ConvexHull;
 use nalgebra::{Isometry3, Point3, Vector3};
@@ -21,12 +22,29 @@ pub struct PairContact {
 }
 
 /// Signed distance between `robot` and `part` when below `prediction` (m);
-/// `None` when they are further apart. The robot part's allowance is
+/// `None` when they are further apart. A long part is first cut to the
+/// piece near the robot shape ([`super::clip`]). The robot part's allowance is
 /// subtracted (its witness point moves out along the normal by as much), so
 /// the distance is a lower bound on the distance to the real link. Both shapes are placed relative to
 /// the robot primitive's origin so that parry's `f32` arithmetic only sees
 /// small coordinates.
 pub fn pair_contact(robot: &RobotPart, part: &Part, prediction: f64) -> Option<PairContact> {
+    let piece;
+    let part = match part.long {
+        None => part,
+        Some(_) => {
+            let (centre, radius) = robot.bounding_ball();
+            let reach = radius + prediction.max(0.0) + robot.allowance();
+            match near_piece(part, &centre, reach) {
+                Cut::Whole => part,
+                Cut::Beyond => return None,
+                Cut::Piece(p) => {
+                    piece = *p;
+                    &piece
+                }
+            }
+        }
+    };
     if let RobotPart::Convex(hull, link_pose, _) = robot {
         return hull_contact(hull, link_pose, part, prediction);
     }

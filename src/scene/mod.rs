@@ -11,6 +11,7 @@
 
 pub mod broadphase;
 pub mod clearance;
+pub mod clip;
 pub mod compiled;
 pub mod distance;
 pub mod obstacle;

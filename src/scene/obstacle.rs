@@ -21,6 +21,18 @@ use serde::{Deserialize, Deserializer, Serialize};
 /// ones are normalised).
 pub const QUATERNION_NORM_TOLERANCE: f64 = 1e-3;
 
+/// Largest accepted coordinate magnitude (m, base frame): a robot cell is a
+/// few metres across; beyond this the distance arithmetic loses the
+/// precision the certificate needs.
+pub const MAX_COORDINATE_M: f64 = 100.0;
+
+/// Largest accepted size (radius, half extent, elongation; m).
+pub const MAX_SIZE_M: f64 = 100.0;
+
+/// Smallest accepted size (m): below a micrometre a shape is a point that
+/// the single-precision narrow phase cannot tell from nothing.
+pub const MIN_SIZE_M: f64 = 1e-6;
+
 /// One named obstacle.
 #[derive(Clone, Debug, Serialize, PartialEq)]
 pub struct Obstacle {
@@ -182,23 +194,33 @@ impl Check<'_> {
         )
     }
 
-    /// Every value finite; the first that is not is named `field[i]`.
+    /// Every value a coordinate within ±[`MAX_COORDINATE_M`]; the first
+    /// that is not is named `field[i]`.
     fn finite(&self, field: &str, values: &[f64]) -> Result<()> {
-        match values.iter().position(|v| !v.is_finite()) {
+        match values
+            .iter()
+            .position(|v| !(v.is_finite() && v.abs() <= MAX_COORDINATE_M))
+        {
             None => Ok(()),
             Some(i) => Err(self.fail(
                 &format!("{field}[{i}]"),
-                format!("must be a finite number, got {}", values[i]),
+                format!(
+                    "must be a finite coordinate within ±{MAX_COORDINATE_M} m, got {}",
+                    values[i]
+                ),
             )),
         }
     }
 
-    /// A finite number > 0.
+    /// A size in [[`MIN_SIZE_M`], [`MAX_SIZE_M`]].
     fn positive(&self, field: &str, v: f64) -> Result<()> {
-        if v.is_finite() && v > 0.0 {
+        if v.is_finite() && (MIN_SIZE_M..=MAX_SIZE_M).contains(&v) {
             Ok(())
         } else {
-            Err(self.fail(field, format!("must be a finite number > 0, got {v}")))
+            Err(self.fail(
+                field,
+                format!("must be a size in [{MIN_SIZE_M}, {MAX_SIZE_M}] m, got {v}"),
+            ))
         }
     }
 
@@ -268,10 +290,10 @@ impl Check<'_> {
     fn berry(&self, b: &BerryShape) -> Result<()> {
         self.finite("center", &b.center)?;
         self.positive("radius", b.radius)?;
-        if !(b.elongation.is_finite() && b.elongation >= 0.0) {
+        if !(b.elongation.is_finite() && (0.0..=MAX_SIZE_M).contains(&b.elongation)) {
             return Err(self.fail(
                 "elongation",
-                format!("must be a finite number >= 0, got {}", b.elongation),
+                format!("must be in [0, {MAX_SIZE_M}] m, got {}", b.elongation),
             ));
         }
         self.finite("stem_top", &b.stem_top)?;

@@ -5,10 +5,11 @@
 //! [`super::distance`]), so parts keep their poses in `f64` here.
 
 use super::broadphase::{Bounds, Core};
+use super::clip::{LongPart, LONG_PART_M};
 use super::obstacle::{BerryShape, ObstacleShape};
 use crate::geometry::{quaternion, Capsule, Primitive, Sphere};
 use crate::robot::hull::ConvexHull;
-use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use parry3d::shape::{
     Ball, Capsule as ParryCapsule, ConvexPolyhedron, Cuboid, Cylinder, SharedShape,
 };
@@ -23,6 +24,9 @@ pub struct Part {
     pub pose: Isometry3<f64>,
     /// A capsule around the part (base frame), for the broad phase.
     pub core: Core,
+    /// The exact shape of a long part, cut near each robot shape per query
+    /// ([`super::clip`]); `None` for short parts.
+    pub long: Option<LongPart>,
 }
 
 impl std::fmt::Debug for Part {
@@ -73,7 +77,16 @@ fn cylinder_obstacle(a: &[f64; 3], b: &[f64; 3], radius: f64) -> CompiledObstacl
     let pose = Isometry3::from_parts(Translation3::from((a + b) * 0.5), rotation);
     let shape = SharedShape::new(Cylinder::new(0.5 * axis.norm() as f32, radius as f32));
     let core = Core::new(a, b, radius);
-    single(Part { shape, pose, core }, Bounds::capsule(&a, &b, radius))
+    let long = (axis.norm() > LONG_PART_M).then_some(LongPart::Segment { flat_ends: true });
+    single(
+        Part {
+            shape,
+            pose,
+            core,
+            long,
+        },
+        Bounds::capsule(&a, &b, radius),
+    )
 }
 
 /// The convex hull of `points`, about their mean; `None` if parry cannot
@@ -91,6 +104,7 @@ fn convex_obstacle(points: &[[f64; 3]]) -> Option<CompiledObstacle> {
             shape: SharedShape::new(hull),
             pose,
             core,
+            long: None,
         },
         Bounds::points(&pts),
     ))
@@ -141,10 +155,21 @@ fn single(part: Part, bounds: Bounds) -> CompiledObstacle {
 /// A primitive as an obstacle part (base frame).
 fn primitive_part(primitive: &Primitive) -> Part {
     let (shape, pose) = local_primitive(primitive);
+    let long = match primitive {
+        Primitive::Sphere(_) => None,
+        Primitive::Capsule(c) => ((Vector3::from(c.b) - Vector3::from(c.a)).norm() > LONG_PART_M)
+            .then_some(LongPart::Segment { flat_ends: false }),
+        Primitive::Box(b) => b
+            .half_extents
+            .iter()
+            .any(|h| 2.0 * h > LONG_PART_M)
+            .then_some(LongPart::Box(*b)),
+    };
     Part {
         shape: shape.shared(),
         pose,
         core: Core::of_primitive(primitive),
+        long,
     }
 }
 
@@ -240,6 +265,25 @@ impl RobotPart {
         match self {
             RobotPart::Primitive(s, p) => (s.shape(), p),
             RobotPart::Convex(hull, _, p) => (hull.shape().as_ref(), p),
+        }
+    }
+
+    /// A ball (centre, radius; base frame) holding the whole shape.
+    pub fn bounding_ball(&self) -> (Vector3<f64>, f64) {
+        match self {
+            RobotPart::Primitive(shape, pose) => {
+                let radius = match shape {
+                    LocalShape::Ball(b) => b.radius as f64,
+                    LocalShape::Capsule(c) => 0.5 * c.height() as f64 + c.radius as f64,
+                    LocalShape::Cuboid(c) => from_glam(c.half_extents).norm(),
+                };
+                (pose.translation.vector, radius)
+            }
+            RobotPart::Convex(hull, link_pose, _) => {
+                let origin = hull.frame().translation.vector;
+                let radius = hull.reach_from(&origin.into());
+                ((link_pose * Point3::from(origin)).coords, radius)
+            }
         }
     }
 

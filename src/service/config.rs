@@ -1,5 +1,6 @@
 //! Service settings ([`ServiceConfig`]): address, request limits, deadline,
-//! concurrency and the optional bearer token.
+//! concurrency, connection caps and timeouts, and the optional bearer
+//! token.
 
 use super::auth::Token;
 use crate::{Error, Result};
@@ -37,6 +38,29 @@ pub struct ServiceConfig {
     /// Number of requests allowed to wait for a solver slot (default 256);
     /// beyond that the service answers 429 at once.
     pub max_queue: usize,
+    /// Time a client has to send a request's headers (and, on a kept-alive
+    /// connection, the next request's) before the connection is closed
+    /// (default 10 s).
+    pub header_read_timeout: Duration,
+    /// Time a client has to send a request's body once the headers are in
+    /// (default 30 s); slower → 408 `body_timeout`. The deadline counts
+    /// too: a body still arriving at the deadline gets 503.
+    pub body_read_timeout: Duration,
+    /// Open connections at most (default 512). At the cap a new connection
+    /// takes the place of the oldest idle one (no request in flight); when
+    /// every connection is busy it is answered 503 `too_many_connections`.
+    pub max_connections: usize,
+    /// Open connections from one IP address at most (default 128), with the
+    /// same rule.
+    pub max_connections_per_ip: usize,
+    /// How long a graceful shutdown waits for requests in flight before it
+    /// closes every connection and cancels the solves (default 5 s).
+    pub drain_timeout: Duration,
+    /// Decoded image bytes held at once across all requests (default 512
+    /// MiB); an image is counted at twice its decoded size (the decode and
+    /// its RGB copy). A request waits for room until its deadline; one image
+    /// larger than the whole budget → 413 `image_too_large`.
+    pub max_decoded_bytes: u64,
     /// Bearer token required on `/v1/*` and `/metrics` when set.
     pub token: Option<Token>,
     /// Origins allowed by CORS; empty (the default) = CORS off.
@@ -58,6 +82,12 @@ impl Default for ServiceConfig {
             deadline: Duration::from_secs(2),
             max_concurrency: cores,
             max_queue: 256,
+            header_read_timeout: Duration::from_secs(10),
+            body_read_timeout: Duration::from_secs(30),
+            max_connections: 512,
+            max_connections_per_ip: 128,
+            drain_timeout: Duration::from_secs(5),
+            max_decoded_bytes: 512 << 20,
             token: None,
             cors_origins: Vec::new(),
         }
@@ -102,12 +132,32 @@ impl ServiceConfig {
         positive("max_image_pixels", self.max_image_pixels)?;
         positive("max_trajectory_samples", self.max_trajectory_samples as u64)?;
         positive("max_concurrency", self.max_concurrency as u64)?;
-        if self.deadline.is_zero() || self.deadline > Duration::from_secs(3600) {
+        positive("max_connections", self.max_connections as u64)?;
+        positive("max_connections_per_ip", self.max_connections_per_ip as u64)?;
+        positive("max_decoded_bytes", self.max_decoded_bytes)?;
+        for (field, value) in [
+            ("deadline", self.deadline),
+            ("header_read_timeout", self.header_read_timeout),
+            ("body_read_timeout", self.body_read_timeout),
+            ("drain_timeout", self.drain_timeout),
+        ] {
+            if value.is_zero() || value > Duration::from_secs(3600) {
+                return Err(Error::invalid(
+                    field,
+                    format!("must be in (0, 3600] s, got {value:?}"),
+                ));
+            }
+        }
+        if self.max_connections_per_ip > self.max_connections {
             return Err(Error::invalid(
-                "deadline",
-                format!("must be in (0, 3600] s, got {:?}", self.deadline),
+                "max_connections_per_ip",
+                format!(
+                    "must be at most max_connections ({}), got {}",
+                    self.max_connections, self.max_connections_per_ip
+                ),
             ));
         }
+        check_descriptor_limit(self.max_connections)?;
         if self.max_concurrency > 1024 {
             return Err(Error::invalid(
                 "max_concurrency",
@@ -124,6 +174,37 @@ impl ServiceConfig {
         }
         Ok(())
     }
+}
+
+/// File descriptors the process keeps for itself beyond the connections
+/// (listener, model and log files, the runtime's own).
+pub const RESERVED_DESCRIPTORS: u64 = 64;
+
+/// Refuse a connection cap the process's open-file limit cannot hold (the
+/// accept loop would fail with "Too many open files" before the cap).
+fn check_descriptor_limit(max_connections: usize) -> Result<()> {
+    let Some(limit) = open_file_limit() else {
+        return Ok(());
+    };
+    let needed = max_connections as u64 + RESERVED_DESCRIPTORS;
+    if needed > limit {
+        return Err(Error::invalid(
+            "max_connections",
+            format!(
+                "{max_connections} connections need {needed} file descriptors, but the process may open {limit} (ulimit -n): lower the cap or raise the limit"
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// The soft limit on open files (`Max open files` in `/proc/self/limits`),
+/// when the platform says.
+fn open_file_limit() -> Option<u64> {
+    let text = std::fs::read_to_string("/proc/self/limits").ok()?;
+    let line = text.lines().find(|l| l.starts_with("Max open files"))?;
+    let soft = line.split_whitespace().nth(3)?;
+    soft.parse().ok()
 }
 
 fn positive(field: &str, value: u64) -> Result<()> {

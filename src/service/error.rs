@@ -3,16 +3,23 @@
 //!
 //! | status | codes |
 //! |---|---|
-//! | 400 | `malformed_json`, `malformed_multipart`, `malformed_image`, `malformed_base64` |
+//! | 400 | `malformed_json`, `malformed_multipart`, `malformed_image`, `malformed_base64`, `malformed_body`, `malformed_request` (not HTTP/1.1) |
 //! | 401 | `unauthorized` |
 //! | 404 | `not_found` |
 //! | 405 | `method_not_allowed` |
+//! | 408 | `body_timeout` |
 //! | 413 | `body_too_large`, `image_too_large` |
+//! | 414 | `uri_too_long` |
 //! | 415 | `unsupported_media_type`, `unsupported_image_format` |
 //! | 422 | `invalid_input`, `infeasible`, `numerical` |
 //! | 429 | `overloaded` |
-//! | 503 | `deadline_exceeded`, `model_unavailable`, `shutting_down` |
-//! | 500 | `internal` (a bug: a panicking solver task) |
+//! | 431 | `headers_too_large` |
+//! | 500 | `internal` (a bug, logged; the answer never carries its text), `model_error` (the loaded model produced an invalid prior) |
+//! | 503 | `deadline_exceeded`, `model_unavailable`, `shutting_down`, `too_many_connections` |
+//!
+//! The 400/414/431 answers for requests hyper cannot parse and the 503
+//! `too_many_connections` are written by the accept loop
+//! ([`super::server`]) in the same shape.
 
 use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
@@ -142,9 +149,37 @@ impl ApiError {
         )
     }
 
-    /// 500 for a bug (a solver task that panicked).
+    /// 500 for a bug (a solver task that panicked). The message is the
+    /// server's own words, never a panic's text.
     pub fn internal(message: impl Into<String>) -> Self {
         Self::new(StatusCode::INTERNAL_SERVER_ERROR, "internal", message)
+    }
+
+    /// 500 when the loaded model's output is not a valid prior (a model
+    /// fault, not the client's).
+    pub fn model_error(message: impl Into<String>) -> Self {
+        Self::new(StatusCode::INTERNAL_SERVER_ERROR, "model_error", message)
+    }
+
+    /// 503 once a graceful shutdown has begun.
+    pub fn shutting_down() -> Self {
+        Self::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "shutting_down",
+            "the service is shutting down; retry on another instance or after the restart",
+        )
+    }
+
+    /// 408 when the body did not arrive within `body_read_timeout`.
+    pub fn body_timeout(timeout: std::time::Duration) -> Self {
+        Self::new(
+            StatusCode::REQUEST_TIMEOUT,
+            "body_timeout",
+            format!(
+                "the request body did not arrive within {} ms",
+                timeout.as_millis()
+            ),
+        )
     }
 }
 
@@ -156,7 +191,7 @@ impl From<crate::Error> for ApiError {
                 StatusCode::UNPROCESSABLE_ENTITY
             }
             Error::Cancelled(_) => StatusCode::SERVICE_UNAVAILABLE,
-            Error::File { .. } => StatusCode::INTERNAL_SERVER_ERROR,
+            Error::File { .. } | Error::Model(_) => StatusCode::INTERNAL_SERVER_ERROR,
         };
         let code = match &e {
             Error::Cancelled(_) => "deadline_exceeded",

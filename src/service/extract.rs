@@ -5,8 +5,9 @@
 //! - body over the limit → 413 `body_too_large`;
 //! - bytes that are not JSON (syntax, truncation, trailing data, nesting
 //!   deeper than 128, numbers out of range) → 400 `malformed_json`;
-//! - JSON of the wrong shape (unknown field, wrong type, missing field) →
-//!   422 `invalid_input` with the JSON path of the field.
+//! - JSON of the wrong shape (unknown field, wrong type, missing field, a
+//!   key twice in one object) → 422 `invalid_input` with the JSON path of
+//!   the field.
 
 use super::error::ApiError;
 use axum::body::Bytes;
@@ -14,6 +15,8 @@ use axum::extract::{FromRequest, Request};
 use axum::http::header::CONTENT_TYPE;
 use axum::http::{HeaderMap, StatusCode};
 use serde::de::DeserializeOwned;
+use std::future::Future;
+use std::time::{Duration, Instant};
 
 /// The request media types the service reads.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -81,9 +84,30 @@ pub async fn read_body<S: Send + Sync>(request: Request, state: &S) -> Result<By
         })
 }
 
+/// `read` (a body being received) bounded in time: by the request's
+/// `deadline` (then 503 `deadline_exceeded`) and by `timeout` from now
+/// (then 408 `body_timeout`), whichever comes first.
+pub async fn within_body_time<T>(
+    deadline: Instant,
+    timeout: Duration,
+    read: impl Future<Output = Result<T, ApiError>>,
+) -> Result<T, ApiError> {
+    let slow = Instant::now() + timeout;
+    match tokio::time::timeout_at(deadline.min(slow).into(), read).await {
+        Ok(result) => result,
+        Err(_) if deadline <= slow => Err(ApiError::deadline_exceeded(
+            "the deadline passed while the request body was still arriving",
+        )),
+        Err(_) => Err(ApiError::body_timeout(timeout)),
+    }
+}
+
 /// Parse JSON bytes into `T`: syntax errors → 400 `malformed_json`, shape
-/// errors → 422 `invalid_input` naming the JSON path.
+/// errors and duplicate keys → 422 `invalid_input` naming the JSON path.
 pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
+    if let Some(d) = crate::strict_json::find_duplicate_key(bytes) {
+        return Err(ApiError::invalid(d.path.clone(), d.to_string()));
+    }
     let mut de = serde_json::Deserializer::from_slice(bytes);
     let value = serde_path_to_error::deserialize(&mut de).map_err(path_error)?;
     de.end().map_err(|e| {

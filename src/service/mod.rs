@@ -11,9 +11,12 @@
 //!
 //! The contract is `api/openapi.yaml` (a test keeps it and [`routes::table`]
 //! equal). Errors are `{"error": {"code", "message", "field"}}`
-//! ([`error::ApiError`]); no input gives a 5xx. CPU work runs on the blocking
-//! pool under a concurrency limit and a deadline ([`limits`]); an optional
-//! bearer token guards `/v1/*` and `/metrics` ([`auth`]); CORS is off unless
+//! ([`error::ApiError`]); no input gives a 5xx. All of a request's CPU work
+//! (body parsing, image decoding, inference, the optimiser) runs on the
+//! blocking pool under a concurrency limit and a deadline counted from the
+//! request's arrival ([`limits`]); connections are capped and time out, and
+//! a shutdown drains within a time limit ([`server`]); an optional bearer
+//! token guards `/v1/*` and `/metrics` ([`auth`]); CORS is off unless
 //! origins are configured. No endpoint reads a file path from a request.
 //!
 //! ```no_run
@@ -35,6 +38,7 @@ pub mod image;
 pub mod limits;
 pub mod metrics;
 pub mod routes;
+pub mod server;
 pub mod state;
 
 pub use config::ServiceConfig;
@@ -49,7 +53,8 @@ use std::net::SocketAddr;
 use tokio::sync::oneshot;
 
 /// The complete router for `state`: routes, auth, body limit, metrics,
-/// JSON 404/405 answers and (only when configured) CORS.
+/// the arrival stamp and shutdown gate ([`server::layers`]), JSON 404/405
+/// answers and (only when configured) CORS.
 pub fn router(state: AppState) -> Router {
     let mut open = Router::new();
     let mut protected = Router::new();
@@ -66,7 +71,12 @@ pub fn router(state: AppState) -> Router {
         .fallback(not_found)
         .method_not_allowed_fallback(method_not_allowed)
         .layer(DefaultBodyLimit::max(state.config().body_limit_bytes))
-        .layer(from_fn_with_state(state.clone(), metrics::track));
+        .layer(from_fn_with_state(
+            state.clone(),
+            server::layers::shutdown_gate,
+        ))
+        .layer(from_fn_with_state(state.clone(), metrics::track))
+        .layer(axum::middleware::from_fn(server::layers::stamp_arrival));
     if let Some(cors) = cors_layer(&state.config().cors_origins) {
         app = app.layer(cors);
     }
@@ -98,47 +108,79 @@ fn cors_layer(origins: &[String]) -> Option<tower_http::cors::CorsLayer> {
     )
 }
 
-/// Serve on `listener` until `shutdown` resolves, then stop accepting
-/// connections and finish the requests in flight.
+/// Serve on `listener` until `shutdown` resolves, then drain and close
+/// ([`server`]).
 pub async fn serve_on(
     listener: tokio::net::TcpListener,
     state: AppState,
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> crate::Result<()> {
     let app = router(state.clone());
-    let on_shutdown = async move {
-        shutdown.await;
-        state.begin_shutdown();
-        tracing::info!("shutting down: finishing requests in flight");
-    };
-    axum::serve(listener, app)
-        .with_graceful_shutdown(on_shutdown)
-        .await
-        .map_err(|e| crate::Error::Numerical(format!("the HTTP server failed: {e}")))
+    server::serve_on(listener, state, app, shutdown).await
 }
 
-/// Resolves on SIGINT (Ctrl-C) or SIGTERM.
+/// Resolves on the first SIGINT (Ctrl-C) or SIGTERM; a second one ends the
+/// process at once (exit code 130), whatever is still draining.
 pub async fn shutdown_signal() {
-    let ctrl_c = async {
-        if tokio::signal::ctrl_c().await.is_err() {
-            std::future::pending::<()>().await;
-        }
-    };
+    let (first, received) = oneshot::channel::<()>();
+    tokio::spawn(async move {
+        let mut signals = Signals::new();
+        signals.next().await;
+        let _ = first.send(());
+        signals.next().await;
+        tracing::warn!("second signal: exiting now");
+        std::process::exit(130);
+    });
+    let _ = received.await;
+}
+
+/// SIGINT and SIGTERM as one stream.
+struct Signals {
     #[cfg(unix)]
-    let terminate = async {
-        use tokio::signal::unix::{signal, SignalKind};
-        match signal(SignalKind::terminate()) {
-            Ok(mut s) => {
-                s.recv().await;
+    interrupt: Option<tokio::signal::unix::Signal>,
+    #[cfg(unix)]
+    terminate: Option<tokio::signal::unix::Signal>,
+}
+
+impl Signals {
+    fn new() -> Signals {
+        #[cfg(unix)]
+        {
+            use tokio::signal::unix::{signal, SignalKind};
+            Signals {
+                interrupt: signal(SignalKind::interrupt()).ok(),
+                terminate: signal(SignalKind::terminate()).ok(),
             }
-            Err(_) => std::future::pending::<()>().await,
         }
-    };
-    #[cfg(not(unix))]
-    let terminate = std::future::pending::<()>();
-    tokio::select! {
-        _ = ctrl_c => {},
-        _ = terminate => {},
+        #[cfg(not(unix))]
+        Signals {}
+    }
+
+    /// The next SIGINT or SIGTERM (never, where neither can be received).
+    async fn next(&mut self) {
+        #[cfg(unix)]
+        {
+            let interrupt = async {
+                match self.interrupt.as_mut() {
+                    Some(s) => s.recv().await,
+                    None => std::future::pending().await,
+                }
+            };
+            let terminate = async {
+                match self.terminate.as_mut() {
+                    Some(s) => s.recv().await,
+                    None => std::future::pending().await,
+                }
+            };
+            tokio::select! {
+                _ = interrupt => {},
+                _ = terminate => {},
+            }
+        }
+        #[cfg(not(unix))]
+        {
+            let _ = tokio::signal::ctrl_c().await;
+        }
     }
 }
 
@@ -168,15 +210,21 @@ async fn bind(addr: SocketAddr) -> crate::Result<tokio::net::TcpListener> {
 /// `dpmp serve` runs).
 pub fn serve(state: AppState) -> crate::Result<()> {
     let rt = runtime(state.config())?;
-    rt.block_on(async move {
+    let result = rt.block_on(async move {
         let listener = bind(state.config().addr).await?;
         let addr = listener.local_addr().map_err(|e| {
             crate::Error::invalid("addr", format!("cannot read the bound address: {e}"))
         })?;
         tracing::info!(%addr, "dpmp service listening");
         serve_on(listener, state, shutdown_signal()).await
-    })
+    });
+    rt.shutdown_timeout(RUNTIME_SHUTDOWN);
+    result
 }
+
+/// How long the runtime waits for blocking tasks (cancelled solves) when
+/// the server has closed; they stop within milliseconds of the cancel.
+const RUNTIME_SHUTDOWN: std::time::Duration = std::time::Duration::from_millis(500);
 
 /// A server running on its own thread and runtime (tests, embedding).
 /// Dropping it shuts it down gracefully.
@@ -198,9 +246,11 @@ impl RunningServer {
         let thread = std::thread::Builder::new()
             .name("dpmp-server".into())
             .spawn(move || {
-                rt.block_on(serve_on(listener, state, async move {
+                let result = rt.block_on(serve_on(listener, state, async move {
                     let _ = stopped.await;
-                }))
+                }));
+                rt.shutdown_timeout(RUNTIME_SHUTDOWN);
+                result
             })
             .map_err(|e| crate::Error::Numerical(format!("cannot spawn the server: {e}")))?;
         Ok(RunningServer {
@@ -220,7 +270,7 @@ impl RunningServer {
         format!("http://{}{}", self.addr, path)
     }
 
-    /// Stop accepting connections, finish requests in flight, and wait.
+    /// Shut down as a signal would ([`server`]: drain, then close) and wait.
     pub fn shutdown(mut self) -> crate::Result<()> {
         self.stop_and_join()
     }

@@ -3,14 +3,17 @@
 //! shutdown flag. Cheap to clone (one `Arc`).
 
 use super::config::ServiceConfig;
+use super::image::DecodeBudget;
 use super::limits::Limiter;
 use super::metrics::Metrics;
 use super::routes;
+use super::server::layers::Arrival;
 use crate::net::Model;
 use crate::robot::Robot;
 use serde_json::Value;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
+use std::time::Instant;
 
 /// Everything a handler needs; nothing in it is read from a request.
 #[derive(Clone, Debug)]
@@ -27,6 +30,7 @@ struct Inner {
     models_info: Value,
     metrics: Metrics,
     limiter: Limiter,
+    decode_budget: Arc<DecodeBudget>,
     shutting_down: AtomicBool,
 }
 
@@ -42,6 +46,7 @@ impl AppState {
             model.config().check_robot(&robot)?;
         }
         let limiter = Limiter::new(config.max_concurrency, config.max_queue);
+        let decode_budget = Arc::new(DecodeBudget::new(config.max_decoded_bytes));
         let robot_info = to_json("robot", &routes::robot::describe(&robot))?;
         let models_info = to_json("models", &routes::models::describe(model.as_ref()))?;
         Ok(AppState {
@@ -53,6 +58,7 @@ impl AppState {
                 models_info,
                 metrics: Metrics::default(),
                 limiter,
+                decode_budget,
                 shutting_down: AtomicBool::new(false),
             }),
         })
@@ -91,6 +97,21 @@ impl AppState {
     /// The solver limiter.
     pub fn limiter(&self) -> &Limiter {
         &self.inner.limiter
+    }
+
+    /// The budget of decoded image bytes held at once.
+    pub fn decode_budget(&self) -> Arc<DecodeBudget> {
+        self.inner.decode_budget.clone()
+    }
+
+    /// The deadline of a request: its [`Arrival`] (stamped by the outermost
+    /// layer; now, for a request without one) plus the configured deadline.
+    pub fn deadline_of(&self, request: &axum::extract::Request) -> Instant {
+        let arrived = request
+            .extensions()
+            .get::<Arrival>()
+            .map_or_else(Instant::now, |a| a.0);
+        arrived + self.inner.config.deadline
     }
 
     /// Whether a graceful shutdown has begun (`/readyz` then answers 503).

@@ -3,6 +3,8 @@
 
 mod validate;
 
+pub use validate::check_prior;
+
 pub use super::report::TrajectoryFormat;
 use crate::promp::annotation::JointAnnotation;
 use crate::promp::PrompConfig;

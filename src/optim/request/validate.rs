@@ -52,7 +52,18 @@ impl OptimizeRequest {
             n_samples: self.promp.n_samples * self.options.verify_factor,
             ..self.promp.clone()
         };
-        dense_config.validate()?;
+        dense_config.validate().map_err(|_| {
+            Error::invalid(
+                "options.verify_factor",
+                format!(
+                    "promp.n_samples × options.verify_factor = {} × {} = {} dense samples, more than the {} allowed",
+                    self.promp.n_samples,
+                    self.options.verify_factor,
+                    dense_config.n_samples,
+                    crate::promp::config::MAX_SAMPLES
+                ),
+            )
+        })?;
         let dense_phases = phase_grid(dense_config.n_samples);
         Ok(Problem {
             robot: robot.clone(),
@@ -300,6 +311,12 @@ fn rate_limits(
 }
 
 /// The prior as a (repaired) weight distribution over `dof x n_basis` weights.
+/// Whether `spec` is a valid prior for `dof` joints of `n_basis` weights
+/// (the same check a request's `prior` gets; errors name `prior.…`).
+pub fn check_prior(spec: &PriorSpec, dof: usize, n_basis: usize) -> Result<()> {
+    prior_distribution(spec, dof, n_basis, &mut Vec::new()).map(|_| ())
+}
+
 fn prior_distribution(
     spec: &PriorSpec,
     dof: usize,

@@ -1,28 +1,36 @@
-//! `POST /v1/optimize`: the optimise request/response of DESIGN.md, solved
-//! on the blocking pool under the concurrency limit and the deadline.
+//! `POST /v1/optimize`: the optimise request/response of DESIGN.md. The
+//! body is read under the body timeout and the deadline; parsing, the
+//! service's limits and the solve all run as one job on the blocking pool
+//! under the concurrency limit and the deadline counted from arrival.
 
 use crate::optim::{optimize_with, OptimizeRequest, OptimizeResponse, SolveControl, Status};
 use crate::service::config::ServiceConfig;
 use crate::service::error::ApiError;
-use crate::service::extract::ApiJson;
+use crate::service::extract::{media_type, parse_json, read_body, within_body_time, MediaType};
 use crate::service::limits::Job;
 use crate::service::state::AppState;
-use axum::extract::State;
+use axum::extract::{Request, State};
 use axum::Json;
-use std::time::Instant;
 
 /// `POST /v1/optimize`.
 pub async fn optimize(
     State(state): State<AppState>,
-    ApiJson(request): ApiJson<OptimizeRequest>,
+    request: Request,
 ) -> Result<Json<OptimizeResponse>, ApiError> {
-    check_request_limits(state.config(), &request)?;
+    if media_type(request.headers()) != Some(MediaType::Json) {
+        return Err(ApiError::unsupported_media_type("application/json"));
+    }
+    let deadline = state.deadline_of(&request);
+    let timeout = state.config().body_read_timeout;
+    let bytes = within_body_time(deadline, timeout, read_body(request, &state)).await?;
     let robot = state.robot();
-    let deadline = Instant::now() + state.config().deadline;
+    let config = state.config().clone();
     let response = state
         .limiter()
-        .run(deadline, move |job| {
-            optimize_with(&request, &robot, &solve_control(job))
+        .run(deadline, move |job| -> Result<OptimizeResponse, ApiError> {
+            let request: OptimizeRequest = parse_json(&bytes)?;
+            check_request_limits(&config, &request)?;
+            Ok(optimize_with(&request, &robot, &solve_control(job))?)
         })
         .await??;
     record_solve(&state, &response);

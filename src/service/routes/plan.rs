@@ -25,15 +25,22 @@ use crate::perception::depth::{DepthImage, DEFAULT_DEPTH_SCALE_M};
 use crate::plan::{
     check_target_position, predict_and_optimize, GoalApproach, PlanInput, PlanResponse, TargetInput,
 };
+use crate::service::config::ServiceConfig;
 use crate::service::error::ApiError;
-use crate::service::extract::{from_value, media_type, parse_json, read_body, MediaType};
-use crate::service::image::{decode_base64, decode_image};
+use crate::service::extract::{
+    from_value, media_type, parse_json, read_body, within_body_time, MediaType,
+};
+use crate::service::image::{
+    decode_base64, decode_image_within, read_header, DecodeBudget, Reservation,
+};
 use crate::service::state::AppState;
+use axum::body::Bytes;
 use axum::extract::{FromRequest, Multipart, Request, State};
 use axum::http::StatusCode;
 use axum::Json;
 use image::DynamicImage;
 use serde_json::{Map, Value};
+use std::sync::Arc;
 use std::time::Instant;
 
 /// Fields of a plan request that are not optimiser fields.
@@ -46,10 +53,30 @@ const SCALE_FIELD: &str = "depth_scale_m";
 const TARGET_FIELD: &str = "target_position";
 const STANDOFF_FIELD: &str = "goal_standoff_m";
 
+/// A request as received, nothing parsed or decoded yet: that is CPU work
+/// and runs in the request's job.
+enum Received {
+    /// The JSON body.
+    Json(Bytes),
+    /// The multipart parts.
+    Multipart {
+        image: Option<Bytes>,
+        depth: Option<Bytes>,
+        request: Option<Bytes>,
+    },
+}
+
 /// Encoded inputs of one request: (field naming it in errors, bytes).
 struct Encoded {
     image: (&'static str, Vec<u8>),
     depth: Option<(&'static str, Vec<u8>)>,
+}
+
+/// What a job needs to turn a received request into a [`PlanInput`].
+struct Decoding {
+    config: ServiceConfig,
+    budget: Arc<DecodeBudget>,
+    deadline: Instant,
 }
 
 /// `POST /v1/plan`.
@@ -57,102 +84,137 @@ pub async fn plan(
     State(state): State<AppState>,
     request: Request,
 ) -> Result<Json<PlanResponse>, ApiError> {
-    let input = match media_type(request.headers()) {
-        Some(MediaType::Json) => parse_json_request(&state, request).await?,
-        Some(MediaType::Multipart) => parse_multipart_request(&state, request).await?,
+    let deadline = state.deadline_of(&request);
+    let timeout = state.config().body_read_timeout;
+    let received = match media_type(request.headers()) {
+        Some(MediaType::Json) => {
+            Received::Json(within_body_time(deadline, timeout, read_body(request, &state)).await?)
+        }
+        Some(MediaType::Multipart) => {
+            within_body_time(deadline, timeout, read_multipart(&state, request)).await?
+        }
         None => {
             return Err(ApiError::unsupported_media_type(
                 "application/json or multipart/form-data",
             ))
         }
     };
-    check_request_limits(state.config(), &input.request)?;
     let model = state.model().ok_or_else(ApiError::model_unavailable)?;
     let robot = state.robot();
-    let deadline = Instant::now() + state.config().deadline;
+    let decoding = Decoding {
+        config: state.config().clone(),
+        budget: state.decode_budget(),
+        deadline,
+    };
     let response = state
         .limiter()
-        .run(deadline, move |job| {
-            predict_and_optimize(&model, &robot, input, &solve_control(job))
+        .run(deadline, move |job| -> Result<PlanResponse, ApiError> {
+            let (input, _held) = received.into_input(&decoding)?;
+            check_request_limits(&decoding.config, &input.request)?;
+            Ok(predict_and_optimize(
+                &model,
+                &robot,
+                input,
+                &solve_control(job),
+            )?)
         })
         .await??;
     record_solve(&state, &response.result);
     Ok(Json(response))
 }
 
-async fn parse_json_request(state: &AppState, request: Request) -> Result<PlanInput, ApiError> {
-    let bytes = read_body(request, state).await?;
-    let mut fields: Map<String, Value> = parse_json(&bytes)?;
-    let image_text = match fields.remove(IMAGE_FIELD) {
-        Some(Value::String(text)) => text,
-        Some(_) => return Err(ApiError::invalid(IMAGE_FIELD, "must be a base64 string")),
-        None => {
-            return Err(ApiError::invalid(
-                IMAGE_FIELD,
-                "missing: the PNG or JPEG image as base64",
-            ))
-        }
-    };
-    let image = (IMAGE_FIELD, decode_base64(IMAGE_FIELD, &image_text)?);
-    let depth = match fields.remove(DEPTH_FIELD) {
-        None | Some(Value::Null) => None,
-        Some(Value::String(text)) => Some((DEPTH_FIELD, decode_base64(DEPTH_FIELD, &text)?)),
-        Some(_) => return Err(ApiError::invalid(DEPTH_FIELD, "must be a base64 string")),
-    };
-    finish_input(state, Encoded { image, depth }, fields)
-}
-
-async fn parse_multipart_request(
-    state: &AppState,
-    request: Request,
-) -> Result<PlanInput, ApiError> {
+/// Collect the parts of a multipart request (bytes only).
+async fn read_multipart(state: &AppState, request: Request) -> Result<Received, ApiError> {
     let mut multipart = Multipart::from_request(request, state)
         .await
         .map_err(|e| multipart_error(e.status(), e.body_text()))?;
-    let mut image: Option<Vec<u8>> = None;
-    let mut depth: Option<Vec<u8>> = None;
-    let mut fields: Option<Map<String, Value>> = None;
+    let (mut image, mut depth, mut fields) = (None, None, None);
     while let Some(part) = multipart
         .next_field()
         .await
         .map_err(|e| multipart_error(e.status(), e.body_text()))?
     {
         let name = part.name().unwrap_or_default().to_string();
-        let bytes = part
-            .bytes()
-            .await
-            .map_err(|e| multipart_error(e.status(), e.body_text()))?;
-        match name.as_str() {
-            "image" if image.is_none() => image = Some(bytes.to_vec()),
-            DEPTH_PART if depth.is_none() => depth = Some(bytes.to_vec()),
-            "request" if fields.is_none() => fields = Some(parse_json(&bytes)?),
-            "image" | DEPTH_PART | "request" => {
-                return Err(malformed_multipart(&format!(
-                    "the part `{name}` appears twice"
-                )))
-            }
+        let slot = match name.as_str() {
+            "image" => &mut image,
+            DEPTH_PART => &mut depth,
+            "request" => &mut fields,
             other => {
                 return Err(malformed_multipart(&format!(
                     "unknown part `{other}`: expected `image`, `request` and optionally `depth`"
                 )))
             }
+        };
+        if slot.is_some() {
+            return Err(malformed_multipart(&format!(
+                "the part `{name}` appears twice"
+            )));
         }
+        let bytes = part
+            .bytes()
+            .await
+            .map_err(|e| multipart_error(e.status(), e.body_text()))?;
+        *slot = Some(bytes);
     }
-    let image = image.ok_or_else(|| malformed_multipart("missing the part `image`"))?;
-    let fields = fields.ok_or_else(|| malformed_multipart("missing the part `request`"))?;
-    for (field, part) in [(IMAGE_FIELD, "image"), (DEPTH_FIELD, DEPTH_PART)] {
-        if fields.contains_key(field) {
-            return Err(ApiError::invalid(
-                field,
-                format!("send it either as the `{part}` part or as base64, not both"),
-            ));
-        }
+    Ok(Received::Multipart {
+        image,
+        depth,
+        request: fields,
+    })
+}
+
+impl Received {
+    /// Parse and decode (in the request's job): the [`PlanInput`] and the
+    /// room its decoded images hold in the budget.
+    fn into_input(self, decoding: &Decoding) -> Result<(PlanInput, Vec<Reservation>), ApiError> {
+        let (encoded, fields) = match self {
+            Received::Json(bytes) => {
+                let mut fields: Map<String, Value> = parse_json(&bytes)?;
+                let image = (
+                    IMAGE_FIELD,
+                    take_base64(&mut fields, IMAGE_FIELD)?.ok_or_else(|| {
+                        ApiError::invalid(IMAGE_FIELD, "missing: the PNG or JPEG image as base64")
+                    })?,
+                );
+                let depth = take_base64(&mut fields, DEPTH_FIELD)?.map(|d| (DEPTH_FIELD, d));
+                (Encoded { image, depth }, fields)
+            }
+            Received::Multipart {
+                image,
+                depth,
+                request,
+            } => {
+                let image = image.ok_or_else(|| malformed_multipart("missing the part `image`"))?;
+                let request =
+                    request.ok_or_else(|| malformed_multipart("missing the part `request`"))?;
+                let fields: Map<String, Value> = parse_json(&request)?;
+                for (field, part) in [(IMAGE_FIELD, "image"), (DEPTH_FIELD, DEPTH_PART)] {
+                    if fields.contains_key(field) {
+                        return Err(ApiError::invalid(
+                            field,
+                            format!("send it either as the `{part}` part or as base64, not both"),
+                        ));
+                    }
+                }
+                let encoded = Encoded {
+                    image: ("image", image.to_vec()),
+                    depth: depth.map(|d| (DEPTH_PART, d.to_vec())),
+                };
+                (encoded, fields)
+            }
+        };
+        finish_input(decoding, encoded, fields)
     }
-    let encoded = Encoded {
-        image: ("image", image),
-        depth: depth.map(|d| (DEPTH_PART, d)),
-    };
-    finish_input(state, encoded, fields)
+}
+
+/// A base64 string field taken out of `fields` and decoded (`None` when
+/// absent or null).
+fn take_base64(fields: &mut Map<String, Value>, field: &str) -> Result<Option<Vec<u8>>, ApiError> {
+    match fields.remove(field) {
+        None | Some(Value::Null) => Ok(None),
+        Some(Value::String(text)) => decode_base64(field, &text).map(Some),
+        Some(_) => Err(ApiError::invalid(field, "must be a base64 string")),
+    }
 }
 
 fn multipart_error(status: StatusCode, text: String) -> ApiError {
@@ -173,12 +235,12 @@ fn malformed_multipart(message: &str) -> ApiError {
 
 /// Validate the non-image fields, build the optimiser request with a
 /// placeholder prior (replaced by the prediction), then decode the image
-/// and the depth.
+/// and the depth within the decode budget.
 fn finish_input(
-    state: &AppState,
+    decoding: &Decoding,
     encoded: Encoded,
     mut fields: Map<String, Value>,
-) -> Result<PlanInput, ApiError> {
+) -> Result<(PlanInput, Vec<Reservation>), ApiError> {
     if fields.contains_key("prior") {
         return Err(ApiError::invalid(
             "prior",
@@ -207,7 +269,15 @@ fn finish_input(
     );
     let request: OptimizeRequest = from_value(Value::Object(fields))?;
     let (image_field, image_bytes) = &encoded.image;
-    let image = decode_image(image_field, image_bytes, state.config().max_image_pixels)?;
+    let max_pixels = decoding.config.max_image_pixels;
+    let (image, image_held) = decode_image_within(
+        image_field,
+        image_bytes,
+        max_pixels,
+        &decoding.budget,
+        decoding.deadline,
+    )?;
+    let mut held = vec![image_held];
     check_box_inside(&target_box, &image)?;
     let target = match (encoded.depth, target_position) {
         (Some(_), Some(_)) => {
@@ -216,10 +286,11 @@ fn finish_input(
                 "send either a depth image or a target position, not both",
             ))
         }
-        (Some((field, bytes)), None) => TargetInput::Depth(
-            decode_depth(field, &bytes, scale, &image)?,
-            field.to_string(),
-        ),
+        (Some((field, bytes)), None) => {
+            let (depth, depth_held) = decode_depth(decoding, field, &bytes, scale, &image)?;
+            held.push(depth_held);
+            TargetInput::Depth(depth, field.to_string())
+        }
         (None, Some(p)) => TargetInput::Position(p),
         (None, None) => TargetInput::None,
     };
@@ -235,7 +306,7 @@ fn finish_input(
             "applies only with a depth image or a target position",
         ));
     }
-    Ok(PlanInput {
+    let input = PlanInput {
         image,
         target_box,
         mask_applied,
@@ -243,7 +314,8 @@ fn finish_input(
         goal_standoff_m,
         request,
         approach,
-    })
+    };
+    Ok((input, held))
 }
 
 /// A `goal` without a `position` (only with a derived goal): its approach
@@ -263,16 +335,34 @@ fn goal_approach(fields: &mut Map<String, Value>) -> Result<Option<GoalApproach>
     }
 }
 
-/// A 16-bit depth PNG of the image's size.
+/// A 16-bit depth PNG of the image's size: the size checked from its header
+/// before decoding, the decoded bytes held in the budget.
 fn decode_depth(
+    decoding: &Decoding,
     field: &str,
     bytes: &[u8],
     scale: Option<f64>,
     image: &DynamicImage,
-) -> Result<DepthImage, ApiError> {
+) -> Result<(DepthImage, Reservation), ApiError> {
+    let header = read_header(field, bytes, decoding.config.max_image_pixels)?;
+    if (header.width, header.height) != (image.width(), image.height()) {
+        return Err(ApiError::invalid(
+            field,
+            format!(
+                "the depth image is {}x{}, the colour image {}x{}: they must be aligned",
+                header.width,
+                header.height,
+                image.width(),
+                image.height()
+            ),
+        ));
+    }
+    let held = decoding
+        .budget
+        .reserve(field, 2 * header.decoded_bytes, decoding.deadline)?;
     let depth = DepthImage::decode_png(bytes, scale.unwrap_or(DEFAULT_DEPTH_SCALE_M), field)?;
     depth.check_aligned(image.width(), image.height(), field)?;
-    Ok(depth)
+    Ok((depth, held))
 }
 
 /// An optional finite number field.
