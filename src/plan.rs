@@ -182,8 +182,15 @@ pub fn predict_and_optimize(
         }
         None => None,
     };
-    let prediction =
-        model.predict_with_depth(&input.image, input.target_box, input.mask_applied, depth_m)?;
+    let prediction = model
+        .predict_with_depth(&input.image, input.target_box, input.mask_applied, depth_m)
+        .map_err(|e| match e {
+            // The network's own output failed its checks: a model fault.
+            Error::Invalid { ref field, .. } if field.starts_with("prediction") => {
+                model_fault(model, &e)
+            }
+            other => other,
+        })?;
     let basis = Basis::new(&request.promp).map_err(|e| e.within("promp"))?;
     check_dimensions(&prediction.distribution, robot, &basis)?;
     check_model_prior(model, &prediction.distribution, robot, &basis)?;
@@ -326,12 +333,16 @@ fn check_model_prior(
     basis: &Basis,
 ) -> Result<()> {
     let spec = crate::optim::PriorSpec::from(d);
-    crate::optim::request::check_prior(&spec, robot.dof(), basis.n_basis()).map_err(|e| {
-        Error::Model(format!(
-            "the model {:?} predicted an invalid prior ({e}); its weights may be corrupt",
-            model.name()
-        ))
-    })
+    crate::optim::request::check_prior(&spec, robot.dof(), basis.n_basis())
+        .map_err(|e| model_fault(model, &e))
+}
+
+/// A model's output that failed a check, as [`Error::Model`].
+fn model_fault(model: &Model, e: &Error) -> Error {
+    Error::Model(format!(
+        "the model {:?} predicted an invalid prior ({e}); its weights may be corrupt",
+        model.name()
+    ))
 }
 
 fn check_dimensions(d: &WeightDistribution, robot: &Robot, basis: &Basis) -> Result<()> {

@@ -248,7 +248,7 @@ mod tests {
     fn path_length_matches_the_bang_bang_closed_forms() {
         // Acceleration only, velocity never reached: a T² / 4.
         let r = rates(Some(10.0), None);
-        let t = 0.5;
+        let t = 0.3;
         let exact = 10.0 * t * t / 4.0;
         let bound = r.path_length_bound(t);
         assert!(bound >= exact && bound <= exact * (1.0 + 5.0 / BOUND_CELLS as f64));

@@ -144,3 +144,32 @@ fn box_piece(part: &Part, b: &OrientedBox, centre: &Vector3<f64>, reach: f64) ->
     piece.core.radius = rest;
     Cut::Piece(Box::new(piece))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::Capsule as Cap;
+    use crate::scene::shape::compile_obstacle;
+    use crate::scene::ObstacleShape;
+
+    #[test]
+    fn a_cut_capsule_is_the_same_capsule_over_the_window() {
+        let a = [0.5315508003090741, 0.7862054375043886, 0.9779796581831582];
+        let b = [
+            0.009276127196650386,
+            -0.11059967181282371,
+            0.6133294672770594,
+        ];
+        let long = compile_obstacle(&ObstacleShape::Capsule(Cap { a, b, radius: 0.02 })).unwrap();
+        let part = &long.parts[0];
+        assert!(part.long.is_some());
+        let centre = Vector3::new(0.25, 0.27, 0.75);
+        let Cut::Piece(piece) = near_piece(part, &centre, 0.07) else {
+            panic!("not cut")
+        };
+        let p = Vector3::new(0.2511556014807565, 0.26472517232676396, 0.7343624560163167);
+        let whole = crate::scene::distance::point_distance(part, &p);
+        let cut = crate::scene::distance::point_distance(&piece, &p);
+        assert!((whole - cut).abs() < 1e-6, "{whole} vs {cut}");
+    }
+}

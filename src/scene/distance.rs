@@ -3,7 +3,8 @@
 //! apart, EPA when penetrating).
 
 use super::clip::{near_piece, Cut};
-use super::shape::{from_glam, parry_pose_relative, to_glam, Part, RobotPart};
+use super::round_contact::round_contact;
+use super::shape::{from_glam, parry_pose_relative, to_glam, LocalShape, Part, RobotPart};
 use crate::robot::hull::ConvexHull;
 use nalgebra::{Isometry3, Point3, Vector3};
 use parry3d::query::ClosestPoints;
@@ -48,6 +49,13 @@ pub fn pair_contact(robot: &RobotPart, part: &Part, prediction: f64) -> Option<P
     if let RobotPart::Convex(hull, link_pose, _) = robot {
         return hull_contact(hull, link_pose, part, prediction);
     }
+    if let RobotPart::Primitive(shape, pose) = robot {
+        if part.shape.as_ball().is_some() || part.shape.as_capsule().is_some() {
+            if let Some(decided) = round_contact(shape, pose, &part.core, prediction) {
+                return decided;
+            }
+        }
+    }
     let (shape, pose) = robot.shape_and_pose();
     let origin = pose.translation.vector;
     let pos1 = parry_pose_relative(pose, &origin);
@@ -63,11 +71,102 @@ pub fn pair_contact(robot: &RobotPart, part: &Part, prediction: f64) -> Option<P
     let normal = (-from_glam(contact.normal1))
         .try_normalize(1e-12)
         .unwrap_or_else(Vector3::z);
+    let (normal, distance) = match robot {
+        RobotPart::Primitive(shape, pose) => {
+            primitive_separation(shape, pose, part, normal).unwrap_or((normal, contact.dist as f64))
+        }
+        RobotPart::Convex(..) => (normal, contact.dist as f64),
+    };
+    if distance >= prediction {
+        return None;
+    }
     Some(PairContact {
-        distance: contact.dist as f64,
+        distance,
         point_robot: from_glam(contact.point1) + origin,
         point_obstacle: from_glam(contact.point2) + origin,
         normal,
+    })
+}
+
+/// A robot primitive against a part that is not round: the largest
+/// separation `min_{y ∈ part} u·y − max_{x ∈ robot} u·x` over parry's
+/// direction, the boxes' face normals and their edge cross products, with
+/// the normal from the part towards the robot. Every separation is a lower
+/// bound on the signed distance (the distance is their maximum over all
+/// directions), so the answer never exceeds it, where parry's `f32` GJK
+/// was measured half a millimetre above it for a box against a finger box.
+/// `None` when the part has no support map.
+fn primitive_separation(
+    shape: &LocalShape,
+    pose: &Isometry3<f64>,
+    part: &Part,
+    parry_normal: Vector3<f64>,
+) -> Option<(Vector3<f64>, f64)> {
+    let part_min = part_support_min(part)?;
+    let centre = pose.translation.vector;
+    let robot_axes: Vec<Vector3<f64>> = match shape {
+        LocalShape::Cuboid(_) => (0..3)
+            .map(|i| pose.rotation * Vector3::ith(i, 1.0))
+            .collect(),
+        _ => Vec::new(),
+    };
+    let robot_max = |u: &Vector3<f64>| -> f64 {
+        match shape {
+            LocalShape::Ball(b) => centre.dot(u) + b.radius as f64,
+            LocalShape::Capsule(c) => {
+                let a = (pose * Point3::from(from_glam(c.segment.a))).coords;
+                let b = (pose * Point3::from(from_glam(c.segment.b))).coords;
+                a.dot(u).max(b.dot(u)) + c.radius as f64
+            }
+            LocalShape::Cuboid(c) => {
+                let h = from_glam(c.half_extents);
+                centre.dot(u)
+                    + (0..3)
+                        .map(|i| h[i] * robot_axes[i].dot(u).abs())
+                        .sum::<f64>()
+            }
+        }
+    };
+    let part_axes: Vec<Vector3<f64>> = match part.shape.as_cuboid() {
+        Some(_) => (0..3)
+            .map(|i| part.pose.rotation * Vector3::ith(i, 1.0))
+            .collect(),
+        None => Vec::new(),
+    };
+    let mut candidates = vec![-parry_normal];
+    for axis in robot_axes.iter().chain(&part_axes) {
+        candidates.extend([*axis, -axis]);
+    }
+    for r in &robot_axes {
+        for q in &part_axes {
+            if let Some(u) = r.cross(q).try_normalize(1e-9) {
+                candidates.extend([u, -u]);
+            }
+        }
+    }
+    // The part's support points come from parry in `f32` about its own
+    // origin: rounding of at most a few ulps of its size.
+    let core = &part.core;
+    let size = 0.5 * (core.b - core.a).norm() + core.radius;
+    let rounding = F32_SUPPORT_ROUNDING * size + 1e-12;
+    candidates
+        .into_iter()
+        .map(|u| (-u, part_min(&u) - robot_max(&u) - rounding))
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+}
+
+/// Relative bound on the `f32` rounding of a part's support point (four
+/// ulps of single precision).
+const F32_SUPPORT_ROUNDING: f64 = 4.0 * f32::EPSILON as f64;
+
+/// `u ↦ min_{y ∈ part} u·y` (base frame) from the part's support map.
+fn part_support_min(part: &Part) -> Option<impl Fn(&Vector3<f64>) -> f64 + '_> {
+    let support = part.shape.as_support_map()?;
+    let origin = part.pose.translation.vector;
+    let part_pose = parry_pose_relative(&part.pose, &origin);
+    Some(move |u: &Vector3<f64>| {
+        let s = from_glam(support.support_point(&part_pose, to_glam(&-u))) + origin;
+        u.dot(&s)
     })
 }
 
@@ -159,14 +258,8 @@ fn best_separating_axis(
     part: &Part,
     parry_normal: Vector3<f64>,
 ) -> (Vector3<f64>, f64) {
-    let Some(support) = part.shape.as_support_map() else {
+    let Some(part_min) = part_support_min(part) else {
         return (parry_normal, f64::NEG_INFINITY);
-    };
-    let origin = part.pose.translation.vector;
-    let part_pose = parry_pose_relative(&part.pose, &origin);
-    let part_min = |u: &Vector3<f64>| -> f64 {
-        let s = from_glam(support.support_point(&part_pose, to_glam(&-u))) + origin;
-        u.dot(&s)
     };
     let hull_max = |u: &Vector3<f64>| -> f64 {
         let local = link_pose.rotation.inverse() * u;

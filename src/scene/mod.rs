@@ -15,6 +15,7 @@ pub mod clip;
 pub mod compiled;
 pub mod distance;
 pub mod obstacle;
+pub mod round_contact;
 pub mod shape;
 
 pub use clearance::Clearance;

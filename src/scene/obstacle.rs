@@ -29,9 +29,9 @@ pub const MAX_COORDINATE_M: f64 = 100.0;
 /// Largest accepted size (radius, half extent, elongation; m).
 pub const MAX_SIZE_M: f64 = 100.0;
 
-/// Smallest accepted size (m): below a micrometre a shape is a point that
-/// the single-precision narrow phase cannot tell from nothing.
-pub const MIN_SIZE_M: f64 = 1e-6;
+/// Smallest accepted size (m): a nanometre, far below any real obstacle
+/// and still a normal single-precision number for the narrow phase.
+pub const MIN_SIZE_M: f64 = 1e-9;
 
 /// One named obstacle.
 #[derive(Clone, Debug, Serialize, PartialEq)]

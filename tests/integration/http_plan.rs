@@ -417,3 +417,43 @@ fn a_derived_goal_takes_the_request_s_approach_direction() {
         );
     }
 }
+
+/// A copy of the shipped model whose head weights are scaled by 1e30 (its
+/// checksum updated, so it loads): its predictions overflow.
+fn broken_model_copy() -> tempfile::TempDir {
+    use dpmp::net::checkpoint;
+    let dir = tempfile::tempdir().unwrap();
+    let from = crate::common::default_model_dir();
+    let mut tensors = checkpoint::read_tensors(&from.join(checkpoint::WEIGHTS_FILE)).unwrap();
+    for (name, (_, values)) in tensors.iter_mut() {
+        if name.starts_with("heads.") {
+            values.iter_mut().for_each(|v| *v *= 1e30);
+        }
+    }
+    let named: Vec<(String, candle_core::Tensor)> = tensors
+        .iter()
+        .map(|(k, (s, v))| {
+            let t = candle_core::Tensor::from_slice(v, s.as_slice(), &candle_core::Device::Cpu);
+            (k.clone(), t.unwrap())
+        })
+        .collect();
+    let weights = dir.path().join(checkpoint::WEIGHTS_FILE);
+    checkpoint::write_tensors(&weights, &named).unwrap();
+    let mut config = crate::common::json::read_json(&from.join(checkpoint::CONFIG_FILE));
+    config["weights_sha256"] = json!(checkpoint::sha256_hex(&std::fs::read(&weights).unwrap()));
+    std::fs::write(dir.path().join(checkpoint::CONFIG_FILE), config.to_string()).unwrap();
+    dir
+}
+
+#[test]
+fn a_model_predicting_an_invalid_prior_is_a_server_error_not_the_clients() {
+    let dir = broken_model_copy();
+    let model = Model::load(dir.path()).unwrap();
+    let state = AppState::new(test_config(), Robot::panda().unwrap(), Some(model)).unwrap();
+    let server = RunningServer::start(state).unwrap();
+    let (jpeg, depth, record) = generated_target_with_depth();
+    let (_, body) = depth_request(&jpeg, &depth, &record);
+    let (status, answer) = post_json(&client(), &server.url("/v1/plan"), body.to_string());
+    assert_eq!((status, code(&answer)), (500, "model_error"), "{answer}");
+    assert_eq!(field(&answer), None, "{answer}");
+}

@@ -15,6 +15,7 @@ mod cli_plan;
 mod cli_prior;
 mod cli_prior_fit;
 mod data_import;
+mod http_abuse;
 mod http_api;
 mod http_contract;
 mod http_plan;

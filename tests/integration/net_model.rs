@@ -281,18 +281,29 @@ fn wrong_shaped_missing_and_corrupt_weights_name_the_problem() {
             .collect()
     };
 
+    // Weights rewritten with their checksum recorded, as a trainer would:
+    // the loader's own checks must name what is wrong.
+    let config_path = dir.path().join(checkpoint::CONFIG_FILE);
+    let rewrite = |map: &checkpoint::TensorMap| {
+        write_tensors(&path, &as_tensors(map)).unwrap();
+        let mut config: serde_json::Value = read_json(&config_path);
+        config["weights_sha256"] =
+            serde_json::json!(checkpoint::sha256_hex(&std::fs::read(&path).unwrap()));
+        std::fs::write(&config_path, config.to_string()).unwrap();
+    };
+
     // Wrong shape.
     let mut map = original.clone();
     let name = "heads.joint3.fc0.weight".to_string();
     map.insert(name.clone(), (vec![2, 2], vec![0.0; 4]));
-    write_tensors(&path, &as_tensors(&map)).unwrap();
+    rewrite(&map);
     let msg = Model::load(dir.path()).unwrap_err().to_string();
     assert!(msg.contains(&name) && msg.contains("shape"), "{msg}");
 
     // Missing tensor.
     let mut map = original.clone();
     map.remove("encoder.block1.bn.running_var");
-    write_tensors(&path, &as_tensors(&map)).unwrap();
+    rewrite(&map);
     let msg = Model::load(dir.path()).unwrap_err().to_string();
     assert!(
         msg.contains("encoder.block1.bn.running_var") && msg.contains("missing"),
@@ -302,7 +313,7 @@ fn wrong_shaped_missing_and_corrupt_weights_name_the_problem() {
     // Non-finite value.
     let mut map = original.clone();
     map.get_mut("encoder.mu.bias").unwrap().1[2] = f32::NAN;
-    write_tensors(&path, &as_tensors(&map)).unwrap();
+    rewrite(&map);
     let msg = Model::load(dir.path()).unwrap_err().to_string();
     assert!(
         msg.contains("encoder.mu.bias") && msg.contains("finite"),
@@ -318,7 +329,7 @@ fn wrong_shaped_missing_and_corrupt_weights_name_the_problem() {
     );
 
     // Malformed config.
-    write_tensors(&path, &as_tensors(&original)).unwrap();
+    rewrite(&original);
     Model::load(dir.path()).unwrap();
     std::fs::write(dir.path().join("config.json"), "{\"format\": 3}").unwrap();
     let msg = Model::load(dir.path()).unwrap_err().to_string();
@@ -394,5 +405,46 @@ fn model_is_send_and_sync_and_shareable_across_threads() {
         .collect();
     for h in handles {
         assert_eq!(h.join().unwrap(), expected);
+    }
+}
+
+#[test]
+fn weights_changed_after_training_fail_their_checksum() {
+    let dir = tempfile::tempdir().unwrap();
+    let network = Network::new(tiny_config(Arch::Cvae), 0, &Device::Cpu).unwrap();
+    checkpoint::save(&network, dir.path()).unwrap();
+    let config: serde_json::Value = read_json(&dir.path().join(checkpoint::CONFIG_FILE));
+    let path = dir.path().join(checkpoint::WEIGHTS_FILE);
+    let bytes = std::fs::read(&path).unwrap();
+    assert_eq!(config["weights_sha256"], checkpoint::sha256_hex(&bytes));
+    Model::load(dir.path()).unwrap();
+    // One exponent bit flipped in every 97th float of the data: finite
+    // values that load without the checksum.
+    let mut flipped = bytes.clone();
+    let header = 8 + u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
+    for k in (header..flipped.len() - 4).step_by(4 * 97) {
+        flipped[k + 3] ^= 0x01;
+    }
+    std::fs::write(&path, &flipped).unwrap();
+    let msg = Model::load(dir.path()).unwrap_err().to_string();
+    assert!(
+        msg.contains("model.safetensors") && msg.contains("weights_sha256"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn the_shipped_models_record_their_weights_checksum() {
+    for name in ["default", "rgb-only"] {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("models")
+            .join(name);
+        let config: serde_json::Value = read_json(&dir.join(checkpoint::CONFIG_FILE));
+        let bytes = std::fs::read(dir.join(checkpoint::WEIGHTS_FILE)).unwrap();
+        assert_eq!(
+            config["weights_sha256"],
+            checkpoint::sha256_hex(&bytes),
+            "{name}"
+        );
     }
 }

@@ -4,6 +4,7 @@
 use crate::common::scene::{obstacle, sphere};
 use dpmp::geometry::{OrientedBox, Sphere};
 use dpmp::scene::{BerryShape, Obstacle, ObstacleShape, Scene, SceneFile};
+use serde_json::json;
 
 const REQUEST_OBSTACLES: &str = r#"{"obstacles": [
     {"id": "berry-2", "type": "sphere", "center": [0.6, 0.0, 0.7], "radius": 0.015},
@@ -294,17 +295,17 @@ fn validation_messages_are_pinned() {
     assert_eq!(
         messages,
         [
-            r#"obstacles[0].radius | invalid obstacles[0].radius: obstacle "s": must be a finite number > 0, got 0"#,
-            r#"obstacles[0].radius | invalid obstacles[0].radius: obstacle "c": must be a finite number > 0, got -1"#,
+            r#"obstacles[0].radius | invalid obstacles[0].radius: obstacle "s": must be a size in [0.000000001, 100] m, got 0"#,
+            r#"obstacles[0].radius | invalid obstacles[0].radius: obstacle "c": must be a size in [0.000000001, 100] m, got -1"#,
             r#"obstacles[0].b | invalid obstacles[0].b: obstacle "y": must differ from a (zero-length cylinder)"#,
-            r#"obstacles[0].radius | invalid obstacles[0].radius: obstacle "y": must be a finite number > 0, got 0"#,
-            r#"obstacles[0].half_extents[1] | invalid obstacles[0].half_extents[1]: obstacle "x": must be a finite number > 0, got 0"#,
+            r#"obstacles[0].radius | invalid obstacles[0].radius: obstacle "y": must be a size in [0.000000001, 100] m, got 0"#,
+            r#"obstacles[0].half_extents[1] | invalid obstacles[0].half_extents[1]: obstacle "x": must be a size in [0.000000001, 100] m, got 0"#,
             r#"obstacles[0].rotation | invalid obstacles[0].rotation: obstacle "x": must be a unit quaternion [x, y, z, w], norm is 2"#,
             r#"obstacles[0].points | invalid obstacles[0].points: obstacle "v": a convex hull needs at least 4 points, got 3"#,
             r#"obstacles[0].points | invalid obstacles[0].points: obstacle "v": the points are coplanar (the hull has no volume)"#,
-            r#"obstacles[0].radius | invalid obstacles[0].radius: obstacle "b": must be a finite number > 0, got 0"#,
-            r#"obstacles[0].elongation | invalid obstacles[0].elongation: obstacle "b": must be a finite number >= 0, got -1"#,
-            r#"obstacles[0].stem_radius | invalid obstacles[0].stem_radius: obstacle "b": must be a finite number > 0, got 0"#,
+            r#"obstacles[0].radius | invalid obstacles[0].radius: obstacle "b": must be a size in [0.000000001, 100] m, got 0"#,
+            r#"obstacles[0].elongation | invalid obstacles[0].elongation: obstacle "b": must be in [0, 100] m, got -1"#,
+            r#"obstacles[0].stem_radius | invalid obstacles[0].stem_radius: obstacle "b": must be a size in [0.000000001, 100] m, got 0"#,
             r#"obstacles[0].stem_radius | invalid obstacles[0].stem_radius: obstacle "b": must not exceed the radius 0.1, got 0.2"#,
             r#"obstacles[0].stem_top | invalid obstacles[0].stem_top: obstacle "b": must lie outside the berry body"#,
         ]
@@ -318,6 +319,77 @@ fn validation_messages_are_pinned() {
     let e = Scene::new(vec![nan]).unwrap_err();
     assert_eq!(
         format!("{} | {e}", e.field().unwrap_or("")),
-        r#"obstacles[0].points[1][2] | invalid obstacles[0].points[1][2]: obstacle "v": must be a finite number, got NaN"#
+        r#"obstacles[0].points[1][2] | invalid obstacles[0].points[1][2]: obstacle "v": must be a finite coordinate within ±100 m, got NaN"#
     );
+}
+
+/// A number from about −1e300 to 1e300, log-uniform in magnitude, often
+/// near the validation bounds.
+fn extreme(rng: &mut rand_chacha::ChaCha8Rng) -> f64 {
+    use rand::Rng;
+    let magnitude = 10f64.powf(rng.gen_range(-300.0..300.0));
+    let near_bound = [100.0, 100.0000001, 99.999, 1e-9, 0.99e-9, 0.0][rng.gen_range(0..6)];
+    let v = if rng.gen_bool(0.3) {
+        near_bound
+    } else {
+        magnitude
+    };
+    if rng.gen_bool(0.5) {
+        v
+    } else {
+        -v
+    }
+}
+
+/// Obstacles of every type with extreme coordinates and sizes: each
+/// request either solves or is refused naming an obstacle field, and
+/// nothing panics (parry's EPA and capsule code panic on some such input
+/// when it reaches them).
+#[test]
+fn extreme_obstacles_are_refused_or_solved_never_a_panic() {
+    use rand::{Rng, SeedableRng};
+    let (robot, mut base) = crate::common::requests::typical(0, &Default::default());
+    base.promp.n_samples = 20;
+    base.options.max_iterations = 3;
+    base.options.restarts = 0;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(99);
+    let (mut refused, mut solved) = (0, 0);
+    for case in 0..60 {
+        let mut p = || [extreme(&mut rng), extreme(&mut rng), extreme(&mut rng)];
+        let (a, b, c) = (p(), p(), p());
+        let mut r = rand_chacha::ChaCha8Rng::seed_from_u64(case);
+        let size = extreme(&mut r).abs();
+        let kind = rng.gen_range(0..5);
+        let mut shape = match kind {
+            0 => json!({"type": "sphere", "center": a, "radius": size}),
+            1 => json!({"type": "capsule", "a": a, "b": b, "radius": size}),
+            2 => json!({"type": "cylinder", "a": a, "b": b, "radius": size}),
+            3 => json!({"type": "box", "center": a, "half_extents": [size, size * 0.5, 0.01]}),
+            _ => json!({"type": "convex", "points": [a, b, c, [0.5, 0.5, 0.5]]}),
+        };
+        // Half the cases near the arm, where the narrow phase runs.
+        if case % 2 == 0 && kind != 4 {
+            let key = if kind == 0 || kind == 3 {
+                "center"
+            } else {
+                "a"
+            };
+            shape[key] = json!([0.5, 0.0, 0.6]);
+        }
+        shape["id"] = json!("x");
+        let mut request = base.clone();
+        request.obstacles = vec![serde_json::from_value(shape.clone()).unwrap()];
+        let outcome = std::panic::catch_unwind(|| dpmp::optim::optimize(&request, &robot));
+        match outcome {
+            Err(_) => panic!("case {case}: panicked on {shape}"),
+            Ok(Ok(_)) => solved += 1,
+            Ok(Err(dpmp::Error::Invalid { field, .. })) => {
+                assert!(field.starts_with("obstacles[0]"), "case {case}: {field}");
+                refused += 1;
+            }
+            Ok(Err(e)) => panic!("case {case}: {e} on {shape}"),
+        }
+    }
+    eprintln!("{refused} refused, {solved} solved");
+    assert!(refused > 0 && solved > 0);
 }

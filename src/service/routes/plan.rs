@@ -99,7 +99,9 @@ pub async fn plan(
             ))
         }
     };
-    let model = state.model().ok_or_else(ApiError::model_unavailable)?;
+    // Without a model the request is still parsed first, so that a client's
+    // mistakes are named before the server's missing piece.
+    let model = state.model();
     let robot = state.robot();
     let decoding = Decoding {
         config: state.config().clone(),
@@ -111,6 +113,7 @@ pub async fn plan(
         .run(deadline, move |job| -> Result<PlanResponse, ApiError> {
             let (input, _held) = received.into_input(&decoding)?;
             check_request_limits(&decoding.config, &input.request)?;
+            let model = model.ok_or_else(ApiError::model_unavailable)?;
             Ok(predict_and_optimize(
                 &model,
                 &robot,

@@ -13,6 +13,7 @@
 //! - **Timeouts**: hyper's header read timeout (`header_read_timeout`,
 //!   also between requests on a kept-alive connection); the body read
 //!   timeout and the request deadline are the handlers' ([`super::extract`]).
+//!   A request head over [`MAX_HEADER_BYTES`] is answered 431.
 //! - **Errors**: hyper's own 400/414/431 answers get the JSON error body
 //!   ([`json_errors`]).
 //! - **Shutdown**, in three phases: *serve* until the shutdown future
@@ -40,7 +41,7 @@ use std::net::SocketAddr;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
-use tokio::io::AsyncWriteExt;
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::{TcpListener, TcpStream};
 use tokio::task::JoinSet;
 
@@ -164,6 +165,7 @@ async fn serve_connection(
     builder
         .timer(TokioTimer::new())
         .header_read_timeout(header_read_timeout)
+        .max_header_size(MAX_HEADER_BYTES)
         .writev(false);
     let conn = builder.serve_connection(TokioIo::new(JsonErrors::new(stream)), service);
     tokio::pin!(conn);
@@ -194,12 +196,24 @@ async fn refuse(mut stream: TcpStream, refusal: Refusal) {
         "HTTP/1.1 503 Service Unavailable\r\ncontent-type: application/json\r\ncontent-length: {}\r\nretry-after: 1\r\nconnection: close\r\n\r\n{body}",
         body.len()
     );
-    let write = async {
+    let answer_and_drain = async {
         stream.write_all(answer.as_bytes()).await?;
-        stream.shutdown().await
+        stream.shutdown().await?;
+        // Read what the client sent before closing: closing with unread
+        // bytes makes the kernel reset the connection, and a reset can
+        // discard the answer before the client reads it.
+        let mut sink = [0u8; 4096];
+        while stream.read(&mut sink).await? > 0 {}
+        Ok::<(), std::io::Error>(())
     };
-    let _ = tokio::time::timeout(Duration::from_secs(1), write).await;
+    let _ = tokio::time::timeout(REFUSAL_LINGER, answer_and_drain).await;
 }
+
+/// How long a refused connection is kept to deliver its answer.
+const REFUSAL_LINGER: Duration = Duration::from_millis(500);
+
+/// Largest request head (request line and headers) read; larger → 431.
+pub const MAX_HEADER_BYTES: usize = 64 * 1024;
 
 /// Counts a request in flight on its connection while alive.
 struct BusyGuard(Arc<AtomicUsize>);

@@ -1,0 +1,323 @@
+//! The service under abuse, on loopback, bounded in count and time: the
+//! deadline stops all of a request's work, a cheap proof answers a too
+//! short duration at once, slow and idle clients are cut off, a flood of
+//! idle connections cannot lock `/healthz` out, busy connections at the cap
+//! are refused in JSON, hyper's own parse errors are JSON, and a shutdown
+//! drains within its limit while answering late requests 503.
+
+use crate::common::http::*;
+use crate::common::requests::typical_json;
+use dpmp::service::{AppState, RunningServer, ServiceConfig};
+use serde_json::{json, Value};
+use std::io::{Read, Write};
+use std::net::{SocketAddr, TcpStream};
+use std::time::{Duration, Instant};
+
+/// A server with `config` whose state the test keeps (limiter load).
+fn start_keeping_state(config: ServiceConfig) -> (RunningServer, AppState) {
+    let robot = dpmp::robot::Robot::panda().unwrap();
+    let state = AppState::new(config, robot, None).unwrap();
+    (RunningServer::start(state.clone()).unwrap(), state)
+}
+
+/// A raw connection with read and write timeouts (tests never hang).
+fn connect(addr: SocketAddr) -> TcpStream {
+    let s = TcpStream::connect(addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+    s.set_write_timeout(Some(Duration::from_secs(10))).unwrap();
+    s
+}
+
+/// Everything the server sends until it closes (or the read times out).
+fn read_all(mut s: TcpStream) -> String {
+    let mut out = Vec::new();
+    let _ = s.read_to_end(&mut out);
+    String::from_utf8_lossy(&out).into_owned()
+}
+
+/// Status code and JSON body of a raw HTTP/1.1 answer.
+fn parse_answer(raw: &str) -> (u16, Value) {
+    let status = raw
+        .split_whitespace()
+        .nth(1)
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| panic!("no status line in {raw:?}"));
+    let body = raw.split("\r\n\r\n").nth(1).unwrap_or("");
+    let value = serde_json::from_str(body)
+        .unwrap_or_else(|e| panic!("status {status}: body is not JSON ({e}): {raw:?}"));
+    (status, value)
+}
+
+/// The heaviest request the service accepts: 256 obstacles (246 far from
+/// the robot), 2000 samples x 5 dense, 32 restarts, 1000 iterations, 32
+/// extra samples.
+fn maximal_request() -> Value {
+    let mut v = typical_json(1, &Default::default());
+    let obstacles = v["obstacles"].as_array_mut().unwrap();
+    for k in obstacles.len()..256 {
+        let f = k as f64 / 256.0;
+        obstacles.push(json!({"id": format!("far-{k}"), "type": "sphere",
+            "center": [-0.6 + 0.2 * f, -0.5 + f, 0.3 + 0.5 * f], "radius": 0.02}));
+    }
+    v["promp"]["n_samples"] = json!(2000);
+    v["options"]["verify_factor"] = json!(5);
+    v["options"]["restarts"] = json!(32);
+    v["options"]["max_iterations"] = json!(1000);
+    v["samples"] = json!(32);
+    v
+}
+
+#[test]
+fn the_deadline_stops_every_thread_of_the_request() {
+    let deadline = Duration::from_millis(400);
+    let config = test_config().with_deadline(deadline).with_concurrency(2, 8);
+    let (server, state) = start_keeping_state(config);
+    let url = server.url("/v1/optimize");
+    let body = maximal_request().to_string();
+    let answers: Vec<(u16, Value, Duration, Duration)> = std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..3)
+            .map(|_| {
+                let (url, body, state) = (url.clone(), body.clone(), &state);
+                scope.spawn(move || {
+                    let t0 = Instant::now();
+                    let (status, answer) = post_json(&client(), &url, body);
+                    let answered = t0.elapsed();
+                    // The job is over when the answer is: poll the limiter.
+                    while state.limiter().load().running > 0 && t0.elapsed() < answered * 4 {
+                        std::thread::sleep(Duration::from_millis(2));
+                    }
+                    (status, answer, answered, t0.elapsed())
+                })
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    let mut last_answer = Duration::ZERO;
+    for (status, answer, answered, _) in &answers {
+        match status {
+            200 => {
+                assert_eq!(answer["status"], "max_iterations", "{answer}");
+                let warnings = answer["report"]["warnings"].to_string();
+                assert!(warnings.contains("deadline"), "{warnings}");
+            }
+            503 => assert_eq!(code(answer), "deadline_exceeded"),
+            other => panic!("{other}: {answer}"),
+        }
+        // Parsing 80 kB, the solve and the answer all end at the deadline
+        // (plus the grace period at the very most).
+        assert!(
+            *answered < deadline + dpmp::service::limits::GRACE + Duration::from_millis(300),
+            "answered after {answered:?}"
+        );
+        last_answer = last_answer.max(*answered);
+    }
+    let t0 = Instant::now();
+    while state.limiter().load().running > 0 {
+        assert!(
+            t0.elapsed() < Duration::from_millis(100),
+            "a job still runs after its answer"
+        );
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    // The next ordinary request is served, not refused for want of a slot.
+    let mut small = typical_json(2, &Default::default());
+    small["promp"]["n_samples"] = json!(50);
+    let (status, answer) = post_json(&client(), &url, small.to_string());
+    assert_eq!(status, 200, "{answer}");
+}
+
+#[test]
+fn a_too_short_duration_is_proven_infeasible_at_once() {
+    let server = start(test_config());
+    let mut v = typical_json(1, &Default::default());
+    v["duration_s"] = json!(0.05);
+    v["promp"]["n_samples"] = json!(50);
+    let t0 = Instant::now();
+    let (status, answer) = post_json(&client(), &server.url("/v1/optimize"), v.to_string());
+    assert_eq!(status, 200, "{answer}");
+    assert_eq!(answer["status"], "infeasible", "{answer}");
+    let bound = answer["duration_lower_bound_s"].as_f64().unwrap();
+    assert!(bound > 0.05 && bound < 4.0, "{bound}");
+    assert!(answer["reason"]
+        .as_str()
+        .unwrap()
+        .starts_with("duration_s:"));
+    // The proof is closed-form; the bounded search for a verified duration
+    // is what takes time.
+    assert!(t0.elapsed() < dpmp::optim::duration::DURATION_SEARCH_BUDGET + Duration::from_secs(3));
+    if let Some(d) = answer["min_duration_s"].as_f64() {
+        assert!(d >= bound);
+        v["duration_s"] = json!(d);
+        let (_, again) = post_json(&client(), &server.url("/v1/optimize"), v.to_string());
+        assert_eq!(again["status"], "optimal", "{again}");
+    }
+}
+
+#[test]
+fn idle_connections_are_cut_and_cannot_lock_out_healthz() {
+    let mut config = test_config();
+    config.header_read_timeout = Duration::from_millis(300);
+    config.max_connections = 16;
+    config.max_connections_per_ip = 16;
+    let server = start(config);
+    // Four times the cap of connections that never send a byte.
+    let idle: Vec<TcpStream> = (0..64).map(|_| connect(server.addr())).collect();
+    let t0 = Instant::now();
+    let (status, body) = status_and_json(client().get(server.url("/healthz")).send().unwrap());
+    assert_eq!((status, body["status"].as_str()), (200, Some("ok")));
+    assert!(t0.elapsed() < Duration::from_secs(2), "{:?}", t0.elapsed());
+    // The survivors are closed once the header timeout passes.
+    let t0 = Instant::now();
+    let last = idle.into_iter().last().unwrap();
+    let rest = read_all(last);
+    assert!(
+        rest.is_empty() || rest.starts_with("HTTP/1.1 408"),
+        "{rest:?}"
+    );
+    assert!(t0.elapsed() < Duration::from_secs(3), "{:?}", t0.elapsed());
+}
+
+/// A request whose headers promise a body that never comes (busy).
+fn half_sent(addr: SocketAddr) -> TcpStream {
+    let mut s = connect(addr);
+    write!(
+        s,
+        "POST /v1/optimize HTTP/1.1\r\nhost: x\r\ncontent-type: application/json\r\ncontent-length: 1000\r\n\r\n{{\"pri"
+    )
+    .unwrap();
+    s
+}
+
+#[test]
+fn busy_connections_at_the_cap_refuse_new_ones_in_json() {
+    let mut config = test_config();
+    config.max_connections = 2;
+    config.max_connections_per_ip = 2;
+    let server = start(config);
+    let _busy: Vec<TcpStream> = (0..2).map(|_| half_sent(server.addr())).collect();
+    std::thread::sleep(Duration::from_millis(100));
+    let mut s = connect(server.addr());
+    let _ = s.write_all(b"GET /healthz HTTP/1.1\r\nhost: x\r\n\r\n");
+    let (status, body) = parse_answer(&read_all(s));
+    assert_eq!(
+        (status, code(&body)),
+        (503, "too_many_connections"),
+        "{body}"
+    );
+}
+
+#[test]
+fn a_slow_body_gets_408_in_json() {
+    let mut config = test_config();
+    config.body_read_timeout = Duration::from_millis(300);
+    let server = start(config);
+    let t0 = Instant::now();
+    let (status, body) = parse_answer(&read_all(half_sent(server.addr())));
+    assert_eq!((status, code(&body)), (408, "body_timeout"), "{body}");
+    assert!(t0.elapsed() < Duration::from_secs(3));
+}
+
+#[test]
+fn requests_hyper_cannot_parse_get_json_errors() {
+    let server = start(test_config());
+    let cases: [(Vec<u8>, u16, &str); 3] = [
+        (b"GARBAGE\r\n\r\n".to_vec(), 400, "malformed_request"),
+        (
+            b"GET /healthz HTTP/1.1\r\nhost: x\r\nbad header\r\n\r\n".to_vec(),
+            400,
+            "malformed_request",
+        ),
+        (
+            format!(
+                "GET /healthz HTTP/1.1\r\nhost: x\r\nx-big: {}\r\n\r\n",
+                "a".repeat(dpmp::service::server::MAX_HEADER_BYTES + 4096)
+            )
+            .into_bytes(),
+            431,
+            "headers_too_large",
+        ),
+    ];
+    for (request, want_status, want_code) in cases {
+        let mut s = connect(server.addr());
+        let _ = s.write_all(&request);
+        let raw = read_all(s);
+        let (status, body) = parse_answer(&raw);
+        assert_eq!((status, code(&body)), (want_status, want_code), "{raw:?}");
+    }
+}
+
+#[test]
+fn shutdown_drains_within_its_limit_and_answers_late_requests_503() {
+    let mut config = test_config();
+    config.drain_timeout = Duration::from_millis(600);
+    let server = start(config);
+    let addr = server.addr();
+    // A request whose body never arrives holds the drain until its limit.
+    let stuck = half_sent(addr);
+    std::thread::sleep(Duration::from_millis(100));
+    let t0 = Instant::now();
+    let stopping = std::thread::spawn(move || server.shutdown());
+    std::thread::sleep(Duration::from_millis(100));
+    // During the drain: new requests are answered, not reset.
+    let c = client();
+    let (status, body) = status_and_json(c.get(format!("http://{addr}/readyz")).send().unwrap());
+    assert_eq!(status, 503);
+    assert_eq!(body["shutting_down"], true, "{body}");
+    let (status, body) = post_json(&c, &format!("http://{addr}/v1/optimize"), "{}");
+    assert_eq!((status, code(&body)), (503, "shutting_down"), "{body}");
+    stopping.join().unwrap().unwrap();
+    let took = t0.elapsed();
+    assert!(
+        took >= Duration::from_millis(500) && took < Duration::from_secs(3),
+        "{took:?}"
+    );
+    drop(stuck);
+}
+
+#[test]
+fn duplicate_keys_are_refused_on_every_route() {
+    let server = start_with_default_model();
+    let c = client();
+    let body = r#"{"target_box": [1, 2, 3, 4], "target_box": [5, 6, 7, 8], "image_base64": ""}"#;
+    for route in ["/v1/optimize", "/v1/plan"] {
+        let (status, answer) = post_json(&c, &server.url(route), body);
+        assert_eq!(
+            (status, field(&answer)),
+            (422, Some("target_box")),
+            "{route}: {answer}"
+        );
+    }
+    let mut v = typical_json(0, &Default::default()).to_string();
+    v = v.replacen("\"radius\":", "\"radius\":0.01,\"radius\":", 1);
+    let (status, answer) = post_json(&c, &server.url("/v1/optimize"), v);
+    assert_eq!(status, 422, "{answer}");
+    assert!(field(&answer).unwrap().ends_with(".radius"), "{answer}");
+}
+
+#[test]
+fn oversized_geometry_is_refused_naming_the_field() {
+    let server = start(test_config());
+    let c = client();
+    let cases = [
+        (
+            json!({"id": "huge", "type": "box", "center": [0.5, 0.0, 0.5],
+                   "half_extents": [1e20, 0.1, 0.1]}),
+            "obstacles[0].half_extents[0]",
+        ),
+        (
+            json!({"id": "far", "type": "capsule", "a": [0.5, -1e5, 0.5],
+                   "b": [0.5, 1e5, 0.5], "radius": 0.02}),
+            "obstacles[0].a[1]",
+        ),
+        (
+            json!({"id": "dust", "type": "sphere", "center": [0.5, 0.0, 0.5], "radius": 1e-12}),
+            "obstacles[0].radius",
+        ),
+    ];
+    for (obstacle, want) in cases {
+        let mut v = typical_json(0, &Default::default());
+        v["obstacles"] = json!([obstacle]);
+        let (status, answer) = post_json(&c, &server.url("/v1/optimize"), v.to_string());
+        assert_eq!((status, field(&answer)), (422, Some(want)), "{answer}");
+    }
+}
