@@ -165,30 +165,13 @@ fn mesh_distance(mesh: &TriangleMesh, pose: &Isometry3<f64>, shape: &ObstacleSha
     }
     let ObstacleShape::Box(OrientedBox {
         center,
-        half_extents: h,
-        ..
+        half_extents,
+        rotation,
     }) = shape
     else {
         unreachable!()
     };
-    let corner =
-        |k: usize| Vector3::from_fn(|i, _| center[i] + if k >> i & 1 == 1 { h[i] } else { -h[i] });
-    let box_triangles: Vec<[Vector3<f64>; 3]> = [
-        [0, 1, 3, 2],
-        [4, 5, 7, 6],
-        [0, 1, 5, 4],
-        [2, 3, 7, 6],
-        [0, 2, 6, 4],
-        [1, 3, 7, 5],
-    ]
-    .iter()
-    .flat_map(|f| {
-        [
-            [corner(f[0]), corner(f[1]), corner(f[2])],
-            [corner(f[0]), corner(f[2]), corner(f[3])],
-        ]
-    })
-    .collect();
+    let box_triangles = box_triangles(center, half_extents, rotation);
     world
         .triangles
         .iter()
