@@ -1,5 +1,5 @@
-//! Typed request extractors with the service's own error mapping (axum's
-//! rejections are never answered as they are):
+//! Request bodies read and parsed with the service's own error mapping
+//! (axum's rejections are never answered as they are):
 //!
 //! - wrong or missing `Content-Type` → 415 `unsupported_media_type`;
 //! - body over the limit → 413 `body_too_large`;
@@ -7,7 +7,12 @@
 //!   deeper than 128, numbers out of range) → 400 `malformed_json`;
 //! - JSON of the wrong shape (unknown field, wrong type, missing field, a
 //!   key twice in one object) → 422 `invalid_input` with the JSON path of
-//!   the field.
+//!   the field;
+//! - a body that does not arrive in time → 408 `body_timeout`, or 503 at
+//!   the deadline ([`within_body_time`]).
+//!
+//! Handlers read the bytes on the async runtime and parse them inside the
+//! request's job on the blocking pool ([`super::limits`]).
 
 use super::error::ApiError;
 use axum::body::Bytes;
@@ -39,26 +44,6 @@ pub fn media_type(headers: &HeaderMap) -> Option<MediaType> {
         Some(MediaType::Multipart)
     } else {
         None
-    }
-}
-
-/// A JSON body parsed into `T` with the error mapping of this module.
-#[derive(Debug)]
-pub struct ApiJson<T>(pub T);
-
-impl<S, T> FromRequest<S> for ApiJson<T>
-where
-    S: Send + Sync,
-    T: DeserializeOwned,
-{
-    type Rejection = ApiError;
-
-    async fn from_request(request: Request, state: &S) -> Result<Self, Self::Rejection> {
-        if media_type(request.headers()) != Some(MediaType::Json) {
-            return Err(ApiError::unsupported_media_type("application/json"));
-        }
-        let bytes = read_body(request, state).await?;
-        parse_json(&bytes).map(ApiJson)
     }
 }
 

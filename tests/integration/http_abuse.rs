@@ -106,7 +106,7 @@ fn the_deadline_stops_every_thread_of_the_request() {
         // Parsing 80 kB, the solve and the answer all end at the deadline
         // (plus the grace period at the very most).
         assert!(
-            *answered < deadline + dpmp::service::limits::GRACE + Duration::from_millis(300),
+            *answered < deadline + dpmp::service::limits::GRACE + Duration::from_millis(1000),
             "answered after {answered:?}"
         );
         last_answer = last_answer.max(*answered);
@@ -320,4 +320,145 @@ fn oversized_geometry_is_refused_naming_the_field() {
         let (status, answer) = post_json(&c, &server.url("/v1/optimize"), v.to_string());
         assert_eq!((status, field(&answer)), (422, Some(want)), "{answer}");
     }
+}
+
+/// `dpmp serve` as a child process on an ephemeral port (read off its log),
+/// with `flags`; stderr is kept for the test to read.
+fn serve_process(flags: &[&str]) -> (std::process::Child, SocketAddr) {
+    use std::io::BufRead;
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_dpmp"))
+        .args(["serve", "--addr", "127.0.0.1:0"])
+        .args(flags)
+        .env("RUST_LOG", "info")
+        .env_remove("DPMP_API_TOKEN")
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let stderr = child.stderr.take().unwrap();
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        for line in std::io::BufReader::new(stderr)
+            .lines()
+            .map_while(Result::ok)
+        {
+            let line = strip_ansi(&line);
+            if let Some(i) = line.find("addr=") {
+                let addr = line[i + 5..]
+                    .split_whitespace()
+                    .next()
+                    .unwrap_or("")
+                    .to_string();
+                let _ = tx.send(addr);
+            }
+        }
+    });
+    let addr = rx
+        .recv_timeout(Duration::from_secs(60))
+        .expect("the server logs its address");
+    (child, addr.parse().unwrap())
+}
+
+/// `text` without ANSI colour sequences (`ESC [ ... m`).
+fn strip_ansi(text: &str) -> String {
+    let mut out = String::new();
+    let mut chars = text.chars();
+    while let Some(c) = chars.next() {
+        if c == '\u{1b}' {
+            for d in chars.by_ref() {
+                if d == 'm' {
+                    break;
+                }
+            }
+        } else {
+            out.push(c);
+        }
+    }
+    out
+}
+
+fn signal(child: &std::process::Child, name: &str) {
+    let status = std::process::Command::new("kill")
+        .args([format!("-{name}"), child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+}
+
+/// Wait for the child to exit, at most `limit`; its exit code.
+fn exit_within(child: &mut std::process::Child, limit: Duration) -> Option<i32> {
+    let t0 = Instant::now();
+    while t0.elapsed() < limit {
+        if let Some(status) = child.try_wait().unwrap() {
+            return status.code();
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let _ = child.kill();
+    panic!("still running after {limit:?}");
+}
+
+#[cfg(unix)]
+#[test]
+fn sigterm_drains_within_its_limit_and_a_second_signal_exits_at_once() {
+    // A half-sent request holds the drain until its limit, then exit 0.
+    let (mut child, addr) = serve_process(&["--drain-timeout-ms", "800"]);
+    let stuck = half_sent(addr);
+    std::thread::sleep(Duration::from_millis(100));
+    let t0 = Instant::now();
+    signal(&child, "TERM");
+    assert_eq!(exit_within(&mut child, Duration::from_secs(10)), Some(0));
+    let took = t0.elapsed();
+    assert!(took >= Duration::from_millis(700), "{took:?}");
+    drop(stuck);
+    // A second signal during a long drain ends the process at once.
+    let (mut child, addr) = serve_process(&["--drain-timeout-ms", "60000"]);
+    let stuck = half_sent(addr);
+    std::thread::sleep(Duration::from_millis(100));
+    signal(&child, "TERM");
+    std::thread::sleep(Duration::from_millis(200));
+    let t0 = Instant::now();
+    signal(&child, "INT");
+    assert_eq!(exit_within(&mut child, Duration::from_secs(5)), Some(130));
+    assert!(t0.elapsed() < Duration::from_secs(2), "{:?}", t0.elapsed());
+    drop(stuck);
+}
+
+#[test]
+fn the_dense_sample_limit_names_both_fields_it_multiplies() {
+    let server = start(test_config());
+    let mut v = typical_json(0, &Default::default());
+    v["promp"]["n_samples"] = json!(2000);
+    v["options"]["verify_factor"] = json!(6);
+    let (status, answer) = post_json(&client(), &server.url("/v1/optimize"), v.to_string());
+    assert_eq!(
+        (status, field(&answer)),
+        (422, Some("options.verify_factor")),
+        "{answer}"
+    );
+    let message = answer["error"]["message"].as_str().unwrap();
+    assert!(message.contains("promp.n_samples"), "{message}");
+}
+
+#[test]
+fn a_truncated_jpeg_is_refused_over_http() {
+    let server = start_with_default_model();
+    let img = image::RgbImage::from_fn(64, 48, |x, y| image::Rgb([x as u8, y as u8, 9]));
+    let mut jpeg = Vec::new();
+    image::DynamicImage::ImageRgb8(img)
+        .write_to(
+            &mut std::io::Cursor::new(&mut jpeg),
+            image::ImageFormat::Jpeg,
+        )
+        .unwrap();
+    jpeg.truncate(jpeg.len() / 3);
+    use base64::Engine as _;
+    let body = json!({"image_base64": base64::engine::general_purpose::STANDARD.encode(&jpeg),
+        "target_box": [1, 1, 20, 20], "target_position": [0.66, 0.0, 0.7]});
+    let (status, answer) = post_json(&client(), &server.url("/v1/plan"), body.to_string());
+    assert_eq!(
+        (status, code(&answer)),
+        (400, "malformed_image"),
+        "{answer}"
+    );
+    assert_eq!(field(&answer), Some("image_base64"));
 }
