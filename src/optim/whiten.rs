@@ -6,8 +6,15 @@ use crate::promp::{psd, WeightDistribution};
 use crate::{Error, Result};
 use nalgebra::{DMatrix, DVector};
 
-/// Default regularisation relative to the mean prior variance.
+/// Default regularisation of an ill-conditioned prior, relative to its
+/// mean variance.
 pub const DEFAULT_RELATIVE_LAMBDA: f64 = 1e-6;
+
+/// A prior whose smallest eigenvalue is at least this times its largest is
+/// used as stated by default (λ = 0): its optimum is exactly the
+/// Mahalanobis-closest under it. Below, the whitened rows would span more
+/// than four orders of magnitude and the default λ applies.
+pub const WELL_CONDITIONED: f64 = 1e-8;
 
 /// The affine map `z -> w = μ + L z` and its inverse.
 #[derive(Clone, Debug)]
@@ -19,12 +26,13 @@ pub struct Whitening {
 }
 
 impl Whitening {
-    /// Factor `cov + lambda I`; `lambda` must be finite and > 0.
+    /// Factor `cov + lambda I`; `lambda` must be finite and >= 0 (0 only
+    /// for a prior that is positive definite to the factorisation).
     pub fn new(dist: &WeightDistribution, lambda: f64) -> Result<Whitening> {
-        if !lambda.is_finite() || lambda <= 0.0 {
+        if !lambda.is_finite() || lambda < 0.0 {
             return Err(Error::invalid(
                 "options.lambda",
-                format!("must be a finite number > 0, got {lambda}"),
+                format!("must be a finite number >= 0, got {lambda}"),
             ));
         }
         let n = dist.dim();
@@ -48,9 +56,17 @@ impl Whitening {
         })
     }
 
-    /// `lambda` = [`DEFAULT_RELATIVE_LAMBDA`] x the mean prior variance
-    /// (at least 1e-12).
+    /// The default `lambda`: 0 for a well-conditioned prior (every
+    /// eigenvalue of its covariance at least [`WELL_CONDITIONED`] x the
+    /// largest), else [`DEFAULT_RELATIVE_LAMBDA`] x the mean prior variance
+    /// (at least 1e-12), which only matters in the (nearly) singular
+    /// directions.
     pub fn default_lambda(dist: &WeightDistribution) -> f64 {
+        let sym = (&dist.cov + dist.cov.transpose()) * 0.5;
+        let eigenvalues = sym.symmetric_eigenvalues();
+        if eigenvalues.min() >= WELL_CONDITIONED * eigenvalues.max() && eigenvalues.min() > 0.0 {
+            return 0.0;
+        }
         let n = dist.dim().max(1) as f64;
         (DEFAULT_RELATIVE_LAMBDA * dist.cov.trace() / n).max(1e-12)
     }
@@ -93,6 +109,26 @@ mod tests {
     use crate::promp::{Basis, PrompConfig};
 
     #[test]
+    fn the_default_leaves_a_well_conditioned_prior_as_stated_and_floors_a_singular_one() {
+        let basis = Basis::new(&PrompConfig::default()).unwrap();
+        let dist = example_distribution(&basis, 20, 3).unwrap();
+        let n = dist.dim();
+        let mut pd = dist.clone();
+        pd.cov += DMatrix::identity(n, n) * 1e-2;
+        assert_eq!(Whitening::default_lambda(&pd), 0.0);
+        let wh = Whitening::new(&pd, 0.0).unwrap();
+        let rebuilt = wh.factor() * wh.factor().transpose();
+        assert!((rebuilt - &pd.cov).amax() < 1e-10 * pd.cov.amax());
+        // A rank-one prior keeps the regularisation.
+        let v = DVector::from_fn(n, |i, _| 1.0 + i as f64);
+        let mut singular = dist.clone();
+        singular.cov = &v * v.transpose();
+        let mean_variance = v.norm_squared() / n as f64;
+        let lambda = Whitening::default_lambda(&singular);
+        assert!((lambda - DEFAULT_RELATIVE_LAMBDA * mean_variance).abs() < 1e-9 * lambda);
+    }
+
+    #[test]
     fn whitening_round_trips_and_matches_the_direct_mahalanobis() {
         let basis = Basis::new(&PrompConfig::default()).unwrap();
         let dist = example_distribution(&basis, 20, 3).unwrap();
@@ -112,10 +148,10 @@ mod tests {
     }
 
     #[test]
-    fn non_positive_lambda_is_rejected_with_the_field() {
+    fn negative_lambda_is_rejected_with_the_field() {
         let basis = Basis::new(&PrompConfig::default()).unwrap();
         let dist = example_distribution(&basis, 20, 3).unwrap();
-        for bad in [0.0, -1.0, f64::NAN] {
+        for bad in [-1.0, f64::NAN, f64::INFINITY] {
             let e = Whitening::new(&dist, bad).unwrap_err();
             assert_eq!(e.field(), Some("options.lambda"));
         }

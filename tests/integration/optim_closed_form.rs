@@ -130,3 +130,86 @@ fn binding_limits_agree_with_a_tightly_solved_rerun_and_cost_more_than_equalitie
     }
     assert!(feasible_seen > 0);
 }
+
+/// A positive definite prior (smallest eigenvalue 1e-2) with only a start
+/// equality, default options: the optimum is Gaussian conditioning of the
+/// prior as stated (no regularisation in the reference), to 1e-6 rad on
+/// the trajectory and 1e-7 relative in cost.
+#[test]
+fn default_options_solve_a_positive_definite_prior_exactly() {
+    let (robot, mut req) = convex_request(3);
+    let base = req.validate(&robot).unwrap();
+    let stated = base.prior().clone();
+    let n = stated.dim();
+    let cov = &stated.cov + DMatrix::identity(n, n) * 1e-2;
+    let pd = WeightDistribution::new(stated.mean.clone(), cov, 7, 8).unwrap();
+    req.prior = dpmp::optim::PriorSpec::from(&pd);
+    let mean = base.prior().trajectory_mean(base.basis());
+    let start: Vec<f64> = (0..7)
+        .map(|j| mean[(0, j)] + 0.02 * (j as f64 - 3.0))
+        .collect();
+    req.start = Some(start.clone());
+    req.options.lambda = None;
+    let problem = req.validate(&robot).unwrap();
+    let sol = problem.solve(&SolveControl::default()).unwrap();
+    assert_eq!(sol.status, Status::Optimal, "{:?}", sol.reason);
+    let post = pd
+        .condition(
+            problem.basis(),
+            &[ViaPoint {
+                phase: 0.0,
+                q: start,
+                noise_var: 0.0,
+            }],
+        )
+        .unwrap();
+    let ours = problem.trajectory(&sol.weights);
+    let exact = problem.trajectory(post.mean.as_slice());
+    let worst = ours
+        .points
+        .iter()
+        .zip(&exact.points)
+        .flat_map(|(a, b)| {
+            a.positions
+                .iter()
+                .zip(&b.positions)
+                .map(|(x, y)| (x - y).abs())
+        })
+        .fold(0.0, f64::max);
+    assert!(worst <= 1e-6, "trajectory {worst:e} rad from conditioning");
+    // The cost under the stated prior, computed directly.
+    let d = nalgebra::DVector::from_column_slice(&sol.weights) - &pd.mean;
+    let direct = (d.transpose() * pd.cov.clone().try_inverse().unwrap() * &d)[0].sqrt();
+    let dp = &post.mean - &pd.mean;
+    let best = (dp.transpose() * pd.cov.clone().try_inverse().unwrap() * &dp)[0].sqrt();
+    assert!((direct - best).abs() <= 1e-7 * best, "{direct} vs {best}");
+    assert!(
+        (sol.mahalanobis - best).abs() <= 1e-7 * best,
+        "{} vs {best}",
+        sol.mahalanobis
+    );
+    // The former default (λ = 1e-6 × the mean variance) for comparison.
+    let mut old = req.clone();
+    old.options.lambda = Some(1e-6 * pd.cov.trace() / n as f64);
+    let old_problem = old.validate(&robot).unwrap();
+    let old_sol = old_problem.solve(&SolveControl::default()).unwrap();
+    let old_traj = old_problem.trajectory(&old_sol.weights);
+    let old_worst = old_traj
+        .points
+        .iter()
+        .zip(&exact.points)
+        .flat_map(|(a, b)| {
+            a.positions
+                .iter()
+                .zip(&b.positions)
+                .map(|(x, y)| (x - y).abs())
+        })
+        .fold(0.0, f64::max);
+    let od = nalgebra::DVector::from_column_slice(&old_sol.weights) - &pd.mean;
+    let old_cost = (od.transpose() * pd.cov.clone().try_inverse().unwrap() * &od)[0].sqrt();
+    eprintln!(
+        "default λ: {worst:.1e} rad, cost {:+.1e} relative; former λ: {old_worst:.1e} rad, cost {:+.1e}",
+        direct / best - 1.0,
+        old_cost / best - 1.0
+    );
+}
