@@ -115,7 +115,9 @@ impl Problem {
         // An interrupted verification has no clearance figures: never feasible.
         let clearance_checked = self.scene.is_empty()
             || (report.min_clearance_m.is_some() && report.continuous_clearance_m.is_some());
-        clearance_checked
+        // An interrupted verification checked nothing densely.
+        report.verified_samples > 0
+            && clearance_checked
             && clear_ok
             && goal_ok
             && approach_ok
