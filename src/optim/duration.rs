@@ -151,10 +151,11 @@ impl Problem {
     /// the module docs); microseconds, no QP.
     pub fn duration_proof(&self) -> Option<DurationProof> {
         let demand = self.demand()?;
-        if self.duration_allows(&demand, self.duration) {
+        let rates = self.joint_rates();
+        if self.duration_allows(&rates, &demand, self.duration) {
             return None;
         }
-        let lower_bound_s = self.shortest_allowed(&demand);
+        let lower_bound_s = self.shortest_allowed(&rates, &demand);
         let what = match &demand {
             Demand::TcpTravel(d) => format!(
                 "the TCP must travel at least {d:.3} m from the start to within goal.tolerance_m of goal.position"
@@ -193,9 +194,8 @@ impl Problem {
         (d > 0.0).then_some(Demand::TcpTravel(d))
     }
 
-    /// Whether `duration` lets the robot make `demand` within the limits.
-    fn duration_allows(&self, demand: &Demand, duration: f64) -> bool {
-        let rates = self.joint_rates();
+    /// Whether `duration` lets the robot make `demand` within `rates`.
+    fn duration_allows(&self, rates: &[JointRates], demand: &Demand, duration: f64) -> bool {
         match demand {
             Demand::TcpTravel(d) => {
                 let reach: f64 = rates
@@ -214,14 +214,14 @@ impl Problem {
 
     /// The smallest duration the bound allows for `demand` (bisection; the
     /// bound is monotone in the duration), rounded down to the millisecond.
-    fn shortest_allowed(&self, demand: &Demand) -> Option<f64> {
-        if !self.duration_allows(demand, MAX_DURATION_S) {
+    fn shortest_allowed(&self, rates: &[JointRates], demand: &Demand) -> Option<f64> {
+        if !self.duration_allows(rates, demand, MAX_DURATION_S) {
             return None;
         }
         let (mut lo, mut hi) = (self.duration, MAX_DURATION_S);
         while hi - lo > BISECTION_TOLERANCE * hi {
             let mid = 0.5 * (lo + hi);
-            if self.duration_allows(demand, mid) {
+            if self.duration_allows(rates, demand, mid) {
                 hi = mid;
             } else {
                 lo = mid;

@@ -17,9 +17,9 @@
 //! exact `f64` description ([`LongPart`]) for this; the cut is built per
 //! query, only for them.
 
-use super::shape::{to_glam, Part};
+use super::shape::{to_glam, y_onto, Part};
 use crate::geometry::OrientedBox;
-use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Translation3, Vector3};
 use parry3d::shape::{Capsule, Cuboid, Cylinder, SharedShape};
 
 /// Parts longer than this (m; a box: any full extent) are cut per query.
@@ -82,10 +82,7 @@ fn segment_piece(part: &Part, centre: &Vector3<f64>, reach: f64, flat_ends: bool
     piece.core.a = a;
     piece.core.b = b;
     if flat_ends {
-        let rotation = UnitQuaternion::rotation_between(&Vector3::y(), &dir).unwrap_or_else(|| {
-            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
-        });
-        piece.pose = Isometry3::from_parts(Translation3::from(mid), rotation);
+        piece.pose = Isometry3::from_parts(Translation3::from(mid), y_onto(&dir));
         let half = (0.5 * (hi - lo)).max(1e-9);
         piece.shape = SharedShape::new(Cylinder::new(half as f32, core.radius as f32));
     } else {

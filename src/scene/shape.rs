@@ -71,10 +71,7 @@ fn primitive_obstacle(primitive: &Primitive) -> CompiledObstacle {
 fn cylinder_obstacle(a: &[f64; 3], b: &[f64; 3], radius: f64) -> CompiledObstacle {
     let (a, b) = (Vector3::from(*a), Vector3::from(*b));
     let axis = b - a;
-    let rotation = UnitQuaternion::rotation_between(&Vector3::y(), &axis).unwrap_or_else(|| {
-        UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
-    });
-    let pose = Isometry3::from_parts(Translation3::from((a + b) * 0.5), rotation);
+    let pose = Isometry3::from_parts(Translation3::from((a + b) * 0.5), y_onto(&axis));
     let shape = SharedShape::new(Cylinder::new(0.5 * axis.norm() as f32, radius as f32));
     let core = Core::new(a, b, radius);
     let long = (axis.norm() > LONG_PART_M).then_some(LongPart::Segment { flat_ends: true });
@@ -87,6 +84,14 @@ fn cylinder_obstacle(a: &[f64; 3], b: &[f64; 3], radius: f64) -> CompiledObstacl
         },
         Bounds::capsule(&a, &b, radius),
     )
+}
+
+/// The rotation taking the y axis (parry's cylinder axis) onto `axis`
+/// (a half turn about x when `axis` points along −y).
+pub fn y_onto(axis: &Vector3<f64>) -> UnitQuaternion<f64> {
+    UnitQuaternion::rotation_between(&Vector3::y(), axis).unwrap_or_else(|| {
+        UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
+    })
 }
 
 /// The convex hull of `points`, about their mean; `None` if parry cannot

@@ -131,6 +131,27 @@ fn binding_limits_agree_with_a_tightly_solved_rerun_and_cost_more_than_equalitie
     assert!(feasible_seen > 0);
 }
 
+/// Largest joint-position difference between two trajectories (rad).
+fn largest_position_gap(a: &dpmp::optim::JointTrajectory, b: &dpmp::optim::JointTrajectory) -> f64 {
+    a.points
+        .iter()
+        .zip(&b.points)
+        .flat_map(|(p, q)| {
+            p.positions
+                .iter()
+                .zip(&q.positions)
+                .map(|(x, y)| (x - y).abs())
+        })
+        .fold(0.0, f64::max)
+}
+
+/// The Mahalanobis distance of `weights` under `prior` as stated (its
+/// covariance inverted directly, no regularisation).
+fn stated_mahalanobis(prior: &WeightDistribution, weights: &[f64]) -> f64 {
+    let d = nalgebra::DVector::from_column_slice(weights) - &prior.mean;
+    (d.transpose() * prior.cov.clone().try_inverse().unwrap() * &d)[0].sqrt()
+}
+
 /// A positive definite prior (smallest eigenvalue 1e-2) with only a start
 /// equality, default options: the optimum is Gaussian conditioning of the
 /// prior as stated (no regularisation in the reference), to 1e-6 rad on
@@ -165,23 +186,11 @@ fn default_options_solve_a_positive_definite_prior_exactly() {
         .unwrap();
     let ours = problem.trajectory(&sol.weights);
     let exact = problem.trajectory(post.mean.as_slice());
-    let worst = ours
-        .points
-        .iter()
-        .zip(&exact.points)
-        .flat_map(|(a, b)| {
-            a.positions
-                .iter()
-                .zip(&b.positions)
-                .map(|(x, y)| (x - y).abs())
-        })
-        .fold(0.0, f64::max);
+    let worst = largest_position_gap(&ours, &exact);
     assert!(worst <= 1e-6, "trajectory {worst:e} rad from conditioning");
     // The cost under the stated prior, computed directly.
-    let d = nalgebra::DVector::from_column_slice(&sol.weights) - &pd.mean;
-    let direct = (d.transpose() * pd.cov.clone().try_inverse().unwrap() * &d)[0].sqrt();
-    let dp = &post.mean - &pd.mean;
-    let best = (dp.transpose() * pd.cov.clone().try_inverse().unwrap() * &dp)[0].sqrt();
+    let direct = stated_mahalanobis(&pd, &sol.weights);
+    let best = stated_mahalanobis(&pd, post.mean.as_slice());
     assert!((direct - best).abs() <= 1e-7 * best, "{direct} vs {best}");
     assert!(
         (sol.mahalanobis - best).abs() <= 1e-7 * best,
@@ -194,19 +203,8 @@ fn default_options_solve_a_positive_definite_prior_exactly() {
     let old_problem = old.validate(&robot).unwrap();
     let old_sol = old_problem.solve(&SolveControl::default()).unwrap();
     let old_traj = old_problem.trajectory(&old_sol.weights);
-    let old_worst = old_traj
-        .points
-        .iter()
-        .zip(&exact.points)
-        .flat_map(|(a, b)| {
-            a.positions
-                .iter()
-                .zip(&b.positions)
-                .map(|(x, y)| (x - y).abs())
-        })
-        .fold(0.0, f64::max);
-    let od = nalgebra::DVector::from_column_slice(&old_sol.weights) - &pd.mean;
-    let old_cost = (od.transpose() * pd.cov.clone().try_inverse().unwrap() * &od)[0].sqrt();
+    let old_worst = largest_position_gap(&old_traj, &exact);
+    let old_cost = stated_mahalanobis(&pd, &old_sol.weights);
     eprintln!(
         "default λ: {worst:.1e} rad, cost {:+.1e} relative; former λ: {old_worst:.1e} rad, cost {:+.1e}",
         direct / best - 1.0,
