@@ -22,9 +22,10 @@ use super::shape::{from_glam, LocalShape};
 use crate::geometry::segment::closest_segments;
 use nalgebra::{Isometry3, Point3, Vector3};
 
-/// Golden-section steps: the bracket shrinks to 0.618^80 ≈ 2e-17 of the
-/// segment.
-const GOLDEN_STEPS: usize = 80;
+/// Golden-section steps: the bracket shrinks to 0.618^48 ≈ 1e-10 of the
+/// segment (a cut piece is at most tens of centimetres: sub-nanometre in
+/// `t`, and the distance is flat to second order at its minimum).
+const GOLDEN_STEPS: usize = 48;
 
 /// Core distances below this (m) have no reliable normal: left to parry.
 const DEGENERATE_M: f64 = 1e-12;
@@ -92,6 +93,17 @@ fn box_segment_closest(
         let p = at(t);
         (p - clamp(&p)).norm()
     };
+    if (b - a).norm_squared() < DEGENERATE_M * DEGENERATE_M {
+        // A ball: its centre's closest point, no search.
+        let on_box = clamp(&a);
+        if (a - on_box).norm() < DEGENERATE_M {
+            return None;
+        }
+        return Some((
+            (pose * Point3::from(on_box)).coords,
+            (pose * Point3::from(a)).coords,
+        ));
+    }
     let phi = 0.5 * (5f64.sqrt() - 1.0);
     let (mut lo, mut hi) = (0.0, 1.0);
     let (mut x1, mut x2) = (hi - phi * (hi - lo), lo + phi * (hi - lo));
