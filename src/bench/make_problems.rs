@@ -162,10 +162,13 @@ pub fn make_one(generator: &Generator, category: &str, i: usize, seed: u64) -> R
 }
 
 /// The prior mean's geometry a category places obstacles against.
-struct MeanPath {
-    start: Vec<f64>,
-    end: Vec<f64>,
-    tcp: Vec<Vector3<f64>>,
+pub(super) struct MeanPath {
+    /// The mean's start configuration.
+    pub(super) start: Vec<f64>,
+    /// The mean's final configuration.
+    pub(super) end: Vec<f64>,
+    /// The mean's TCP position at every basis sample.
+    pub(super) tcp: Vec<Vector3<f64>>,
 }
 
 /// A request under construction with its witness candidates.
@@ -258,8 +261,9 @@ fn try_make(
         name: format!("{category}-{i:02}"),
         request: draft.request,
         expect: Expect {
-            feasible,
+            feasible: Some(feasible),
             min_clearance_m: feasible.then_some(CLEARANCE_M),
+            witness: None,
         },
         meta: Meta {
             generator: GENERATOR.to_string(),
@@ -307,7 +311,8 @@ fn prior_for(
     (dist, demos, format!("prior of {n} demonstrations"))
 }
 
-fn mean_path(robot: &Robot, basis: &Basis, dist: &WeightDistribution) -> MeanPath {
+/// The prior mean's start, end and TCP path.
+pub(super) fn mean_path(robot: &Robot, basis: &Basis, dist: &WeightDistribution) -> MeanPath {
     let q = dist.trajectory_mean(basis);
     MeanPath {
         start: q.row(0).iter().copied().collect(),

@@ -5,6 +5,7 @@
 //! ([`report`], [`plots`]). `dpmp bench` (src/cli/bench.rs) is a thin shell
 //! over [`run_suite`] and [`make_problems()`].
 
+pub mod hard_set;
 pub mod make_problems;
 pub mod methods;
 pub mod model_suite;
@@ -16,6 +17,7 @@ pub mod synth_target;
 pub mod typical_labels;
 pub mod witness;
 
+pub use hard_set::{make_hard_set, HardSettings};
 pub use make_problems::{make_problems, MakeSettings};
 pub use methods::{method_from_name, Method, DEFAULT_METHODS};
 pub use problem_file::{load_dir, Expect, Meta, ProblemFile, CATEGORIES};

@@ -79,8 +79,9 @@ pub fn target_problem(
         name: entry.id.clone(),
         request,
         expect: Expect {
-            feasible: true,
+            feasible: Some(true),
             min_clearance_m: Some(MODEL_CLEARANCE_M),
+            witness: None,
         },
         meta: Meta {
             generator: MODEL_GENERATOR.to_string(),

@@ -9,6 +9,7 @@
 //! into [`crate::optim::OptimizeRequest`] by the runner, which reports a
 //! malformed request as a failed problem instead of aborting.
 
+use super::hard_set::HARD_CATEGORY;
 use crate::{Error, Result};
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
@@ -18,11 +19,16 @@ use std::path::{Path, PathBuf};
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct Expect {
-    /// Whether a trajectory satisfying every constraint exists.
-    pub feasible: bool,
+    /// Whether a trajectory satisfying every constraint exists; `null`:
+    /// unknown (no search found one and nothing proves there is none).
+    pub feasible: Option<bool>,
     /// Optional lower bound a feasible answer's minimum clearance must meet (m).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub min_clearance_m: Option<f64>,
+    /// Joint-major weights that satisfy every constraint (the proof of a
+    /// `feasible: true` label found by a search).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub witness: Option<Vec<f64>>,
 }
 
 /// How a problem file was made.
@@ -79,11 +85,23 @@ impl ProblemFile {
         };
         let expect = take_block::<Expect>(&mut map, "expect")?;
         let meta = take_block::<Meta>(&mut map, "meta")?;
-        if !CATEGORIES.contains(&meta.category.as_str()) {
+        if !CATEGORIES.contains(&meta.category.as_str()) && meta.category != HARD_CATEGORY {
             return Err(Error::invalid(
                 "meta.category",
-                format!("must be one of {CATEGORIES:?}, got {:?}", meta.category),
+                format!(
+                    "must be one of {CATEGORIES:?} or {HARD_CATEGORY:?}, got {:?}",
+                    meta.category
+                ),
             ));
+        }
+        if let Some(w) = &expect.witness {
+            if expect.feasible != Some(true) {
+                return Err(Error::invalid(
+                    "expect.witness",
+                    "only a problem labelled feasible has a witness",
+                ));
+            }
+            crate::error::ensure_finite("expect.witness", w)?;
         }
         if let Some(c) = expect.min_clearance_m {
             if !c.is_finite() {
@@ -180,7 +198,7 @@ mod tests {
     #[test]
     fn round_trips_request_expect_and_meta() {
         let p = ProblemFile::from_json("p", TEXT).unwrap();
-        assert!(!p.expect.feasible);
+        assert_eq!(p.expect.feasible, Some(false));
         assert_eq!(p.meta.seed, 7);
         assert_eq!(p.request["duration_s"], 2.0);
         assert!(p.request.get("expect").is_none());
@@ -193,9 +211,15 @@ mod tests {
         let no_expect = r#"{"meta": {"generator": "g", "seed": 1, "category": "easy"}}"#;
         let e = ProblemFile::from_json("p", no_expect).unwrap_err();
         assert_eq!(e.field(), Some("expect"));
-        let bad_cat = TEXT.replace("\"infeasible\"", "\"hard\"");
+        let bad_cat = TEXT.replace("\"infeasible\"", "\"extreme\"");
         let e = ProblemFile::from_json("p", &bad_cat).unwrap_err();
         assert_eq!(e.field(), Some("meta.category"));
+        let orphan = TEXT.replace(
+            "\"feasible\": false",
+            "\"feasible\": null, \"witness\": [1.0]",
+        );
+        let e = ProblemFile::from_json("p", &orphan).unwrap_err();
+        assert_eq!(e.field(), Some("expect.witness"));
         let extra = TEXT.replace("\"feasible\": false", "\"feasible\": false, \"x\": 1");
         assert_eq!(
             ProblemFile::from_json("p", &extra).unwrap_err().field(),

@@ -2,6 +2,7 @@
 //! summaries, written as `report.json` (everything, including every record)
 //! and `report.md` (the tables BENCHMARKS.md quotes).
 
+use super::hard_set::HARD_CATEGORY;
 use super::model_suite::MODEL_CATEGORY;
 use super::problem_file::{write_atomic, CATEGORIES};
 use super::runner::RunRecord;
@@ -49,7 +50,7 @@ pub struct MethodSummary {
     pub problems: usize,
     /// Problems that errored.
     pub errors: usize,
-    /// Correct answers / problems.
+    /// Correct answers / labelled problems (unknown labels count in none).
     pub success_rate: f64,
     /// Feasible problems solved with a verified trajectory.
     pub feasible_solved: usize,
@@ -120,7 +121,7 @@ impl Report {
         for c in CATEGORIES
             .iter()
             .copied()
-            .chain([MODEL_CATEGORY, "unknown"])
+            .chain([HARD_CATEGORY, MODEL_CATEGORY, "unknown"])
         {
             for m in methods {
                 let rows: Vec<&RunRecord> = records
@@ -279,28 +280,36 @@ pub fn summarise<'a>(
         .iter()
         .filter(|r| r.found && r.verified_feasible)
         .collect();
-    let feasible_total = rows.iter().filter(|r| r.expect_feasible).count();
+    let feasible_total = rows
+        .iter()
+        .filter(|r| r.expect_feasible == Some(true))
+        .count();
+    let infeasible_total = rows
+        .iter()
+        .filter(|r| r.expect_feasible == Some(false))
+        .count();
+    let labelled = feasible_total + infeasible_total;
     let n = rows.len();
     MethodSummary {
         method: method.to_string(),
         category: category.to_string(),
         problems: n,
         errors: rows.iter().filter(|r| r.error.is_some()).count(),
-        success_rate: if n == 0 {
+        success_rate: if labelled == 0 {
             0.0
         } else {
-            rows.iter().filter(|r| r.success).count() as f64 / n as f64
+            rows.iter().filter(|r| r.success).count() as f64 / labelled as f64
         },
         feasible_solved: rows
             .iter()
-            .filter(|r| r.expect_feasible && r.success)
+            .filter(|r| r.expect_feasible == Some(true) && r.success)
             .count(),
         feasible_total,
         infeasible_identified: rows
             .iter()
-            .filter(|r| !r.expect_feasible && r.success)
+            .filter(|r| r.expect_feasible == Some(false) && r.success)
             .count(),
-        infeasible_total: n - feasible_total,
+        infeasible_total,
         false_feasible: rows
             .iter()
             .filter(|r| r.found && !r.verified_feasible)

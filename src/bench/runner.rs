@@ -32,8 +32,8 @@ pub struct RunRecord {
     pub category: String,
     /// Method name.
     pub method: String,
-    /// `expect.feasible`.
-    pub expect_feasible: bool,
+    /// `expect.feasible` (`None`: unknown, counted in no success rate).
+    pub expect_feasible: Option<bool>,
     /// The method's error, when it failed (parse, validation, solver, panic).
     pub error: Option<String>,
     /// The method returned a trajectory as feasible.
@@ -134,7 +134,7 @@ pub fn run_pair(
 ) -> RunRecord {
     let (category, expect) = match problem {
         Ok(p) => (p.meta.category.clone(), p.expect.feasible),
-        Err(_) => ("unknown".to_string(), true),
+        Err(_) => ("unknown".to_string(), Some(true)),
     };
     let mut record = empty_record(name, &category, &method.name(), expect);
     let result = catch_unwind(AssertUnwindSafe(|| -> Result<Timed> {
@@ -177,7 +177,7 @@ fn p_min(problem: &Result<ProblemFile>) -> Option<f64> {
     problem.as_ref().ok().and_then(|p| p.expect.min_clearance_m)
 }
 
-fn empty_record(name: &str, category: &str, method: &str, expect: bool) -> RunRecord {
+fn empty_record(name: &str, category: &str, method: &str, expect: Option<bool>) -> RunRecord {
     RunRecord {
         problem: name.to_string(),
         category: category.to_string(),
@@ -251,10 +251,10 @@ fn fill(r: &mut RunRecord, min_expected: Option<f64>, t: &Timed) {
     };
     r.verified_feasible =
         r.total_violation() <= tol && rep.equality_error_rad <= tol && clear_enough;
-    r.success = if r.expect_feasible {
-        o.found && r.verified_feasible
-    } else {
-        !o.found
+    r.success = match r.expect_feasible {
+        Some(true) => o.found && r.verified_feasible,
+        Some(false) => !o.found,
+        None => false,
     };
     r.time_ms = t.ms;
     r.iterations = o.iterations;

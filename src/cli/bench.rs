@@ -4,9 +4,12 @@
 //! - `dpmp bench --model DIR --data DIR [--split test] --out DIR [...]`: the
 //!   plan pipeline on a generated dataset (network prior, then each method)
 //! - `dpmp bench make-problems --out problems/ [--seed S] [--per-category N]`
+//! - `dpmp bench make-problems --set hard --out problems/hard [--count N]`
 //! - `dpmp bench label-typical --out problems/typical/labels.json [--count N] [--restarts R]`
 
-use crate::bench::{self, method_from_name, MakeSettings, RunSettings, DEFAULT_METHODS};
+use crate::bench::{
+    self, method_from_name, HardSettings, MakeSettings, RunSettings, DEFAULT_METHODS,
+};
 use crate::{Error, Result};
 use std::path::PathBuf;
 
@@ -84,9 +87,19 @@ pub struct MakeArgs {
     /// Master seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Problems per category (7 categories).
+    /// Problems per category (7 categories; the suite only).
     #[arg(long, default_value_t = 9)]
     pub per_category: usize,
+    /// Which set: `suite` (the seven categories) or `hard` (intruders
+    /// beside the demonstrated path, labelled by a long search).
+    #[arg(long, default_value = "suite", value_parser = ["suite", "hard"])]
+    pub set: String,
+    /// Problems of the hard set.
+    #[arg(long, default_value_t = 200)]
+    pub count: usize,
+    /// Hard set: skip the long-search labels (every label unknown).
+    #[arg(long)]
+    pub no_label: bool,
     /// The robot.
     #[command(flatten)]
     pub robot: super::RobotArgs,
@@ -104,12 +117,22 @@ pub fn run(args: BenchArgs) -> Result<()> {
 fn make(args: MakeArgs) -> Result<()> {
     let robot = args.robot.load()?;
     let generator = bench::make_problems::generator(&robot)?;
-    let settings = MakeSettings {
-        seed: args.seed,
-        per_category: args.per_category,
-        progress: true,
+    let problems = if args.set == "hard" {
+        let settings = HardSettings {
+            seed: args.seed,
+            count: args.count,
+            label: !args.no_label,
+            progress: true,
+        };
+        bench::make_hard_set(&generator, &settings).map_err(super::as_flag_error)?
+    } else {
+        let settings = MakeSettings {
+            seed: args.seed,
+            per_category: args.per_category,
+            progress: true,
+        };
+        bench::make_problems(&generator, &settings).map_err(super::as_flag_error)?
     };
-    let problems = bench::make_problems(&generator, &settings).map_err(super::as_flag_error)?;
     std::fs::create_dir_all(&args.out).map_err(|e| Error::file(&args.out, e.to_string()))?;
     for p in &problems {
         p.save(&args.out)?;

@@ -25,7 +25,11 @@ fn committed_suite_covers_every_category_with_valid_requests() {
     for (name, p) in &problems {
         let p = p.as_ref().unwrap_or_else(|e| panic!("{name}: {e}"));
         *per_category.entry(p.meta.category.clone()).or_insert(0) += 1;
-        assert_eq!(p.expect.feasible, p.meta.category != "infeasible", "{name}");
+        assert_eq!(
+            p.expect.feasible,
+            Some(p.meta.category != "infeasible"),
+            "{name}"
+        );
         let request: OptimizeRequest = serde_json::from_value(p.request.clone()).unwrap();
         request
             .validate(&robot)
@@ -69,7 +73,7 @@ fn generated_problems_are_deterministic_and_their_constructions_bind() {
     assert_eq!(a.to_json().unwrap(), b.to_json().unwrap());
     assert_eq!(a.meta.generator, GENERATOR);
     assert_eq!((a.meta.seed, a.meta.category.as_str()), (77, "on-path"));
-    assert!(a.expect.feasible);
+    assert_eq!(a.expect.feasible, Some(true));
     let request: OptimizeRequest = serde_json::from_value(a.request.clone()).unwrap();
     let problem = request.validate(&robot).unwrap();
     let mean: Vec<f64> = match &request.prior {
@@ -80,7 +84,7 @@ fn generated_problems_are_deterministic_and_their_constructions_bind() {
     assert!(report.min_clearance_m.unwrap() < request.clearance_m);
 
     let inf = make_one(&g, "infeasible", 1, 78).unwrap();
-    assert!(!inf.expect.feasible);
+    assert_eq!(inf.expect.feasible, Some(false));
     let request: OptimizeRequest = serde_json::from_value(inf.request.clone()).unwrap();
     let g_pos = request.goal.clone().unwrap().position;
     let scene = Scene::new(request.obstacles.clone()).unwrap();

@@ -6,6 +6,7 @@
 mod common;
 
 mod annotation_reference;
+mod bench_hard;
 mod bench_model;
 mod bench_problems;
 mod bench_runner;
