@@ -18,7 +18,7 @@ use dpmp::fixtures::{typical_request, ExampleSettings};
 use dpmp::optim::{OptimizeRequest, SolveControl, Status};
 use dpmp::robot::Robot;
 use std::io::Write;
-use std::path::Path;
+use std::path::PathBuf;
 use std::time::Instant;
 
 /// One problem of a set: the request and whether it is labelled feasible.
@@ -40,10 +40,14 @@ struct Row {
     split: [f64; 3],
 }
 
+/// The repository root (the problem files live there).
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
 fn typical_cases(robot: &Robot, limit: usize) -> Vec<Case> {
-    let labels =
-        dpmp::bench::typical_labels::TypicalLabels::load(Path::new("problems/typical/labels.json"))
-            .expect("problems/typical/labels.json");
+    let path = repo().join("problems/typical/labels.json");
+    let labels = dpmp::bench::typical_labels::TypicalLabels::load(&path).expect("typical labels");
     let settings = ExampleSettings::default();
     labels
         .labels
@@ -58,7 +62,7 @@ fn typical_cases(robot: &Robot, limit: usize) -> Vec<Case> {
 }
 
 fn hard_cases(limit: usize) -> Vec<Case> {
-    load_dir(Path::new("problems/hard"))
+    load_dir(&repo().join("problems/hard"))
         .expect("problems/hard")
         .into_iter()
         .take(limit)
