@@ -30,6 +30,19 @@ pub enum Error {
         /// What went wrong, naming the field inside the file when known.
         message: String,
     },
+    /// An output that cannot be written (full disk, no permission): not the
+    /// input's fault.
+    #[error("{path}: {message}")]
+    Write {
+        /// The file or folder concerned.
+        path: PathBuf,
+        /// What went wrong.
+        message: String,
+    },
+    /// The answer was printed but is not the one asked for (the CLI's
+    /// `--require-optimal` / `--require-converged`): exit code 3.
+    #[error("{0}")]
+    Unsolved(String),
     /// A problem that is well formed but cannot be solved, with the reason.
     #[error("infeasible: {0}")]
     Infeasible(String),
@@ -62,11 +75,21 @@ impl Error {
         }
     }
 
+    /// An output error for `path` (see [`Error::Write`]).
+    pub fn write(path: impl AsRef<Path>, message: impl Into<String>) -> Self {
+        Error::Write {
+            path: path.as_ref().to_path_buf(),
+            message: message.into(),
+        }
+    }
+
     /// Machine-readable error code (`invalid_input`, `file`, ...).
     pub fn code(&self) -> &'static str {
         match self {
             Error::Invalid { .. } => "invalid_input",
             Error::File { .. } => "file",
+            Error::Write { .. } => "write",
+            Error::Unsolved(_) => "not_optimal",
             Error::Infeasible(_) => "infeasible",
             Error::Cancelled(_) => "cancelled",
             Error::Numerical(_) => "numerical",

@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     let dir = path.parent().filter(|p| !p.as_os_str().is_empty());
     if let Some(dir) = dir {
-        std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, e.to_string()))?;
+        std::fs::create_dir_all(dir).map_err(|e| Error::write(dir, e.to_string()))?;
     }
     let name = path
         .file_name()
@@ -22,7 +22,7 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     let result = std::fs::write(&tmp, bytes).and_then(|()| std::fs::rename(&tmp, path));
     result.map_err(|e| {
         let _ = std::fs::remove_file(&tmp);
-        Error::file(path, format!("cannot write: {e}"))
+        Error::write(path, format!("cannot write: {e}"))
     })
 }
 

@@ -285,6 +285,60 @@ fn locate(
     }
 }
 
+/// The target box `[x1, y1, x2, y2]` must be finite, ordered, inside the
+/// `width x height` image and at least [`MIN_BOX_PX`] on each side; errors
+/// name `field`.
+pub fn check_target_box(b: &[f64; 4], width: u32, height: u32, field: &str) -> Result<()> {
+    crate::error::ensure_finite(field, b)?;
+    if b[0] >= b[2] || b[1] >= b[3] {
+        return Err(Error::invalid(
+            field,
+            format!("needs x1 < x2 and y1 < y2, got {b:?}"),
+        ));
+    }
+    let (w, h) = (f64::from(width), f64::from(height));
+    if b[0] < 0.0 || b[1] < 0.0 || b[2] > w || b[3] > h {
+        return Err(Error::invalid(
+            field,
+            format!("the box {b:?} is not inside the {width}x{height} image"),
+        ));
+    }
+    if b[2] - b[0] < MIN_BOX_PX || b[3] - b[1] < MIN_BOX_PX {
+        return Err(Error::invalid(
+            field,
+            format!(
+                "the box {b:?} is {:.2} x {:.2} px, under {MIN_BOX_PX} px: it is in image pixels x1,y1,x2,y2, not normalised to 0..1",
+                b[2] - b[0],
+                b[3] - b[1]
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Depth back-projection uses the model's camera: the colour image (and
+/// the aligned depth image) must be of its size; errors name `field` (the
+/// colour image's input).
+pub fn check_camera_size(model: &Model, width: u32, height: u32, field: &str) -> Result<()> {
+    let camera = model.config().camera_model().intrinsics;
+    if (camera.width, camera.height) == (width, height) {
+        return Ok(());
+    }
+    Err(Error::invalid(
+        field,
+        format!(
+            "the colour image is {width}x{height}, but model {}'s camera is {}x{}: depth is back-projected with that camera's intrinsics, so send the camera's full images (or a 3-D target position instead of depth)",
+            model.name(),
+            camera.width,
+            camera.height
+        ),
+    ))
+}
+
+/// The smallest target box side accepted (px): a berry the camera sees
+/// covers more, and a box under it is usually given in normalised units.
+pub const MIN_BOX_PX: f64 = 2.0;
+
 /// Validate a client's `target_position`.
 pub fn check_target_position(p: &[f64; 3]) -> Result<()> {
     crate::error::ensure_finite("target_position", p)?;

@@ -84,7 +84,7 @@ pub fn run_and_report(
     settings: &RunSettings,
     command: &str,
 ) -> Result<Report> {
-    std::fs::create_dir_all(out).map_err(|e| Error::file(out, e.to_string()))?;
+    std::fs::create_dir_all(out).map_err(|e| Error::write(out, e.to_string()))?;
     let records = run_benchmark(problems, &methods, robot, settings)?;
     let names: Vec<String> = methods.iter().map(|m| m.name()).collect();
     let report = Report::new(command, &names, records);

@@ -154,7 +154,7 @@ impl TypicalLabels {
     /// Write the labels as pretty JSON, atomically.
     pub fn save(&self, path: &Path) -> Result<()> {
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, e.to_string()))?;
+            std::fs::create_dir_all(dir).map_err(|e| Error::write(dir, e.to_string()))?;
         }
         let text = serde_json::to_string_pretty(self)
             .map_err(|e| Error::file(path, format!("cannot serialise: {e}")))?;

@@ -133,7 +133,7 @@ fn make(args: MakeArgs) -> Result<()> {
         };
         bench::make_problems(&generator, &settings).map_err(super::as_flag_error)?
     };
-    std::fs::create_dir_all(&args.out).map_err(|e| Error::file(&args.out, e.to_string()))?;
+    std::fs::create_dir_all(&args.out).map_err(|e| Error::write(&args.out, e.to_string()))?;
     for p in &problems {
         p.save(&args.out)?;
     }

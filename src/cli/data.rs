@@ -80,7 +80,7 @@ pub struct GenerateArgs {
     #[arg(long)]
     pub settings: Option<PathBuf>,
     /// Target region `xmin,ymin,zmin,xmax,ymax,zmax` (m), instead of the real data's region.
-    #[arg(long, value_delimiter = ',', num_args = 6)]
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
     pub region: Option<Vec<f64>>,
     /// What `--region` bounds: `pre-grasp` (default: the demonstrations end
     /// in it, as the real ones do) or `berry` (the berry centres).
@@ -181,7 +181,8 @@ pub fn settings_from_args(a: &GenerateArgs) -> Result<SynthSettings> {
     s.berries_per_config = a.berries_per_config;
     s.demos.demos = a.demos;
     if let Some(r) = &a.region {
-        crate::error::ensure_len("region", r, 6)?;
+        crate::error::ensure_len("--region", r, 6)?;
+        crate::error::ensure_finite("--region", r)?;
         s.plant.region.min = [r[0], r[1], r[2]];
         s.plant.region.max = [r[3], r[4], r[5]];
     }
@@ -212,6 +213,9 @@ fn run_generate(a: GenerateArgs) -> Result<()> {
             overwrite: a.overwrite,
         },
     )?;
+    for w in &summary.warnings {
+        eprintln!("warning: {w}");
+    }
     super::print_json(&summary)
 }
 
@@ -274,7 +278,7 @@ fn run_preview(a: PreviewArgs) -> Result<()> {
     let settings = SynthSettings::new(1, a.berries);
     let generator = Generator::new(settings, a.robot.load()?)?;
     let output = generator.config(a.seed, a.config)?;
-    std::fs::create_dir_all(&a.out).map_err(|e| Error::file(&a.out, e.to_string()))?;
+    std::fs::create_dir_all(&a.out).map_err(|e| Error::write(&a.out, e.to_string()))?;
     for (record, image) in output.records.iter().zip(&output.images) {
         let path = a.out.join(format!("{}.png", record.id));
         write_png_atomic(&path, image)?;

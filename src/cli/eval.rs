@@ -24,8 +24,9 @@ pub struct EvalArgs {
     /// Output: table (Markdown) or json.
     #[arg(long, default_value = "table")]
     pub format: String,
-    /// Directory for eval.json, eval.md and embedding.png (default: the
-    /// model directory's `eval-<split>`).
+    /// Directory for eval.json, eval.md and embedding.png [default:
+    /// `eval-<model name>-<split>` inside the dataset folder; never inside
+    /// the model].
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Covariance weight alpha of the Eq. 7 column (default: the model's).
@@ -71,9 +72,10 @@ pub fn run(args: EvalArgs) -> crate::Result<()> {
             &fk,
         )?);
     }
-    let out = args
-        .out
-        .unwrap_or_else(|| args.model.join(format!("eval-{}", args.split)));
+    let out = args.out.clone().unwrap_or_else(|| {
+        args.data
+            .join(format!("eval-{}-{}", model.name(), args.split))
+    });
     write_outputs(&out, &report, &embedding)?;
     if args.format == "json" {
         crate::cli::print_json(&report)

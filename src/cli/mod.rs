@@ -2,8 +2,12 @@
 //!
 //! Every subcommand is a thin shell over a library call: it parses flags
 //! (clap), loads inputs, calls the library and prints JSON (or a table).
-//! Errors go to stderr; the exit code is 2 for invalid input and 1 for any
-//! other failure.
+//! Errors go to stderr; the exit code is 2 for invalid input (a flag, a
+//! field, or an input file that is missing, unreadable or malformed), 1 for
+//! any other failure (an output that cannot be written, a numerical
+//! failure), 3 when `--require-optimal` / `--require-converged` was given
+//! and the printed answer is not that, and 0 otherwise (see the README's
+//! "Exit codes").
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -59,6 +63,20 @@ pub enum Command {
     Bench(bench::BenchArgs),
 }
 
+/// `Err(Unsolved)` (exit 3) when `required` and `status` is not `optimal`.
+pub fn require_optimal(required: bool, status: crate::optim::Status) -> crate::Result<()> {
+    if required && status != crate::optim::Status::Optimal {
+        let name = serde_json::to_value(status)
+            .ok()
+            .and_then(|v| v.as_str().map(str::to_string))
+            .unwrap_or_default();
+        return Err(crate::Error::Unsolved(format!(
+            "the answer is `{name}`, not `optimal` (--require-optimal)"
+        )));
+    }
+    Ok(())
+}
+
 /// Parse the command line, run it, and map errors to exit codes.
 pub fn main() -> ExitCode {
     let cli = Cli::parse();
@@ -67,7 +85,8 @@ pub fn main() -> ExitCode {
         Err(err) => {
             eprintln!("error: {err}");
             match err {
-                crate::Error::Invalid { .. } => ExitCode::from(2),
+                crate::Error::Invalid { .. } | crate::Error::File { .. } => ExitCode::from(2),
+                crate::Error::Unsolved(_) => ExitCode::from(3),
                 _ => ExitCode::from(1),
             }
         }

@@ -19,6 +19,9 @@ pub struct OptimizeArgs {
     /// joint into this `.png` or `.svg` file.
     #[arg(long)]
     pub plot: Option<PathBuf>,
+    /// Exit 3 (after printing the answer) when its status is not `optimal`.
+    #[arg(long)]
+    pub require_optimal: bool,
     /// The robot.
     #[command(flatten)]
     pub robot: super::RobotArgs,
@@ -38,7 +41,8 @@ pub fn run(args: OptimizeArgs) -> Result<()> {
             .map_err(|e| in_file(e, &args.request))?;
         plot_response(plot, &problem, &response)?;
     }
-    super::print_json(&response)
+    super::print_json(&response)?;
+    super::require_optimal(args.require_optimal, response.status)
 }
 
 /// Parse a request file; malformed JSON or unknown fields are invalid input

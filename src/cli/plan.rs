@@ -17,7 +17,9 @@ pub struct PlanArgs {
     /// Camera image (PNG or JPEG, any size).
     #[arg(long)]
     pub image: PathBuf,
-    /// Target berry box in image pixels: x1,y1,x2,y2.
+    /// Target berry box in image pixels, `x1,y1,x2,y2` (top-left and
+    /// bottom-right corners, x right and y down from the top-left pixel;
+    /// at least 2 px each side, inside the image; not normalised).
     #[arg(
         long = "box",
         value_delimiter = ',',
@@ -58,9 +60,9 @@ pub struct PlanArgs {
     #[arg(long)]
     pub scene: Option<PathBuf>,
     /// Trained model folder (model.safetensors + config.json; also from
-    /// DPMP_MODEL_DIR).
-    #[arg(long, env = super::serve::MODEL_DIR_ENV, default_value = super::serve::DEFAULT_MODEL_DIR)]
-    pub model: PathBuf,
+    /// DPMP_MODEL_DIR) [default: the shipped model, carried by the binary].
+    #[arg(long, env = super::serve::MODEL_DIR_ENV)]
+    pub model: Option<PathBuf>,
     /// The robot (must be the one the model was trained for).
     #[command(flatten)]
     pub robot: super::RobotArgs,
@@ -70,6 +72,9 @@ pub struct PlanArgs {
     /// Trajectory duration (s).
     #[arg(long, default_value_t = 4.0)]
     pub duration: f64,
+    /// Exit 3 (after printing the answer) when its status is not `optimal`.
+    #[arg(long)]
+    pub require_optimal: bool,
 }
 
 /// Run `dpmp plan`.
@@ -81,6 +86,7 @@ pub fn run(args: PlanArgs) -> Result<()> {
         .map_err(|_| Error::invalid("--box", "expected four numbers x1,y1,x2,y2"))?;
     let image = image::open(&args.image)
         .map_err(|e| Error::file(&args.image, format!("cannot read image: {e}")))?;
+    crate::plan::check_target_box(&target_box, image.width(), image.height(), "--box")?;
     let obstacles = match &args.scene {
         Some(path) => crate::cli::read_json::<crate::scene::SceneFile>(path)?.obstacles,
         None => Vec::new(),
@@ -92,15 +98,20 @@ pub fn run(args: PlanArgs) -> Result<()> {
         "obstacles": obstacles,
     }))
     .map_err(|e| Error::invalid("--scene", e.to_string()))?;
-    if !args.model.join("config.json").is_file() {
-        return Err(Error::file(
-            &args.model,
-            "no trained model here (config.json missing): train one with `dpmp train` (see the README), or pass --model",
-        ));
+    if let Some(dir) = &args.model {
+        if !dir.join("config.json").is_file() {
+            return Err(Error::file(
+                dir,
+                "no trained model here (config.json missing): train one with `dpmp train` (see the README), or leave --model out for the shipped one",
+            ));
+        }
     }
-    let model = Arc::new(Model::load(&args.model)?);
+    let model = Arc::new(Model::load_or_shipped(args.model.as_deref())?);
     let robot = Arc::new(args.robot.load()?);
     model.config().check_robot(&robot)?;
+    if args.depth.is_some() {
+        crate::plan::check_camera_size(&model, image.width(), image.height(), "--image")?;
+    }
     let target = target_input(&args, &image)?;
     let input = PlanInput {
         image,
@@ -112,7 +123,8 @@ pub fn run(args: PlanArgs) -> Result<()> {
         approach: approach(&args)?,
     };
     let response = predict_and_optimize(&model, &robot, input, &Default::default())?;
-    crate::cli::print_json(&response)
+    crate::cli::print_json(&response)?;
+    crate::cli::require_optimal(args.require_optimal, response.result.status)
 }
 
 /// `--approach-axis` and `--approach-tolerance`, if an axis is given.

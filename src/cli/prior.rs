@@ -49,6 +49,14 @@ pub struct FitArgs {
     /// Also plot the prior (mean ±2σ per joint) into this .png or .svg.
     #[arg(long)]
     pub plot: Option<PathBuf>,
+    /// Unit of the `time` column: auto (the first of s, ms, us, ns giving
+    /// a 0.1-600 s recording), s, ms, us or ns.
+    #[arg(long, default_value = "auto")]
+    pub time_unit: demos::TimeUnit,
+    /// Joints recorded under other column names, `JOINT=COLUMN,...`
+    /// (e.g. `panda_joint1=position_0,panda_joint2=position_1`).
+    #[arg(long)]
+    pub joint_map: Option<String>,
 }
 
 /// Where a prior comes from.
@@ -152,12 +160,21 @@ fn fit(args: &FitArgs) -> Result<()> {
     let basis = Basis::new(&config).map_err(crate::cli::as_flag_error)?;
     let robot = args.robot.load()?;
     let paths = demos::demonstration_paths(&args.demos)?;
+    let options = demos::ReadOptions {
+        time_unit: args.time_unit,
+        joint_columns: match &args.joint_map {
+            Some(text) => {
+                demos::ReadOptions::parse_joint_map("--joint-map", text, robot.joint_names())?
+            }
+            None => Vec::new(),
+        },
+    };
     let progress = crate::progress::bar(true, paths.len() as u64, "demonstrations read");
     let recordings = paths
         .iter()
         .map(|p| {
             progress.inc(1);
-            demos::read_demonstration(p, robot.joint_names())
+            demos::read_demonstration_with(p, robot.joint_names(), &options)
         })
         .collect::<Result<Vec<_>>>()?;
     progress.finish_and_clear();

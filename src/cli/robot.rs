@@ -12,7 +12,8 @@ use std::path::PathBuf;
 /// `dpmp robot` subcommands.
 #[derive(Debug, clap::Subcommand)]
 pub enum RobotCommand {
-    /// Pose of every link: `{"frames": {"<link>": {"position", "quaternion"}}}`.
+    /// Pose of every link: `{"frames": {"<link>": {"position", "quaternion"}}}`,
+    /// position in m (base frame), quaternion `[x, y, z, w]` (scalar last).
     Fk(FkArgs),
     /// Minimum signed clearance against a scene file (`{"obstacles": [...]}`).
     Clearance(ClearanceArgs),
@@ -76,6 +77,9 @@ pub struct IkArgs {
     /// Seed configuration (default: home).
     #[arg(long, allow_hyphen_values = true)]
     pub seed: Option<String>,
+    /// Exit 3 (after printing the answer) when IK does not converge.
+    #[arg(long)]
+    pub require_converged: bool,
     /// The robot model.
     #[command(flatten)]
     pub robot: super::RobotArgs,
@@ -164,6 +168,7 @@ fn clearance_json(args: &ClearanceArgs) -> Result<Value> {
                 "link": c.link_name(&robot),
                 "obstacle": c.obstacle_id(&scene),
                 "shape": c.shape,
+                "shape_name": robot.collision_shapes()[c.shape].describe(),
                 "point_robot": c.point_robot,
                 "point_obstacle": c.point_obstacle,
                 "normal": c.normal,
@@ -190,6 +195,7 @@ fn named_clearance(c: &Clearance, robot: &Robot, scene: &Scene) -> Value {
     json!({
         "distance": c.distance,
         "shape": c.shape,
+        "shape_name": robot.collision_shapes()[c.shape].describe(),
         "link": c.link,
         "link_name": c.link_name(robot),
         "obstacle": c.obstacle,
@@ -219,5 +225,13 @@ fn ik_json(args: &IkArgs) -> Result<Value> {
         approach_axis,
     };
     let solution = robot.ik(&target, &seed, &IkOptions::default())?;
-    serde_json::to_value(solution).map_err(|e| Error::Numerical(e.to_string()))
+    let converged = solution.converged;
+    let value = serde_json::to_value(solution).map_err(|e| Error::Numerical(e.to_string()))?;
+    if args.require_converged && !converged {
+        super::print_json(&value)?;
+        return Err(Error::Unsolved(
+            "IK did not converge (--require-converged)".into(),
+        ));
+    }
+    Ok(value)
 }

@@ -1,7 +1,7 @@
 //! `dpmp serve`: run the HTTP service (see [`crate::service`]).
 //!
 //! ```text
-//! dpmp serve [--addr 127.0.0.1:8080] [--model models/default] [--robot URDF --base LINK --tip LINK]
+//! dpmp serve [--addr 127.0.0.1:8080] [--model DIR | --no-model] [--robot URDF --base LINK --tip LINK]
 //!            [--token-file FILE] [--body-limit-mib 16] [--max-pixels N] [--max-obstacles N]
 //!            [--max-samples N] [--deadline-ms 2000] [--concurrency N] [--queue N]
 //!            [--header-timeout-ms 10000] [--body-timeout-ms 30000]
@@ -26,11 +26,14 @@ pub struct ServeArgs {
     #[arg(long, default_value = crate::service::config::DEFAULT_ADDR)]
     pub addr: String,
     /// Trained network directory (model.safetensors + config.json; also
-    /// from DPMP_MODEL_DIR). Without either, `models/default` is used when
-    /// present; otherwise the service starts without a model and `/v1/plan`
-    /// answers 503.
-    #[arg(long, env = MODEL_DIR_ENV)]
+    /// from DPMP_MODEL_DIR); it must load. Without it: the shipped model,
+    /// which the binary carries (found from any working folder).
+    #[arg(long, env = MODEL_DIR_ENV, conflicts_with = "no_model")]
     pub model: Option<PathBuf>,
+    /// Run without a network model: `/v1/plan` answers 503
+    /// model_unavailable, `/v1/optimize` works.
+    #[arg(long)]
+    pub no_model: bool,
     /// The robot.
     #[command(flatten)]
     pub robot: super::RobotArgs,
@@ -40,22 +43,23 @@ pub struct ServeArgs {
     /// Largest request body in MiB.
     #[arg(long, default_value_t = 16)]
     pub body_limit_mib: usize,
-    /// Largest image in pixels (width x height), checked before decoding.
+    /// Largest image in pixels (width x height), checked before decoding
+    /// [default: 16777216 = 4096 x 4096].
     #[arg(long)]
     pub max_pixels: Option<u64>,
-    /// Largest number of obstacles per request.
+    /// Largest number of obstacles per request [default: 256].
     #[arg(long)]
     pub max_obstacles: Option<usize>,
-    /// Largest number of extra samples per request.
+    /// Largest number of extra samples per request [default: 32].
     #[arg(long)]
     pub max_samples: Option<usize>,
     /// Per-request deadline in milliseconds.
     #[arg(long, default_value_t = 2000)]
     pub deadline_ms: u64,
-    /// Solves running at once (default: CPU cores).
+    /// Solves running at once [default: the CPU cores].
     #[arg(long)]
     pub concurrency: Option<usize>,
-    /// Requests allowed to wait for a solver before 429.
+    /// Requests allowed to wait for a solver before 429 [default: 256].
     #[arg(long)]
     pub queue: Option<usize>,
     /// Time a client has to send a request's headers, also between
@@ -93,9 +97,6 @@ pub struct ServeArgs {
     pub print_typical_request: Option<u64>,
 }
 
-/// Model directory tried when `--model` is not given.
-pub const DEFAULT_MODEL_DIR: &str = "models/default";
-
 /// The environment variable naming the model directory (for an installed
 /// binary that runs outside the repository).
 pub const MODEL_DIR_ENV: &str = "DPMP_MODEL_DIR";
@@ -110,29 +111,26 @@ pub fn run(args: ServeArgs) -> Result<()> {
         return crate::cli::print_json(&request);
     }
     let config = config_from_args(&args)?;
-    let model = load_model(args.model.as_deref())?;
+    let model = load_model(args.model.as_deref(), args.no_model)?;
     let state = AppState::new(config, robot, model)?;
     crate::service::serve(state)
 }
 
-/// `--model DIR` must load; without the flag `models/default` is loaded
-/// when present, else the service runs without a model (with a warning).
-fn load_model(dir: Option<&Path>) -> Result<Option<Model>> {
-    let dir = match dir {
-        Some(dir) => dir,
-        None if Path::new(DEFAULT_MODEL_DIR).join("config.json").exists() => {
-            Path::new(DEFAULT_MODEL_DIR)
-        }
-        None => {
-            tracing::warn!(
-                "no model at {DEFAULT_MODEL_DIR}: /v1/plan will answer 503 model_unavailable \
-                 (train one, see the README, or pass --model DIR); /v1/optimize works"
-            );
-            return Ok(None);
-        }
-    };
-    let model = Model::load(dir)?;
-    tracing::info!(model = model.name(), dir = %dir.display(), "model loaded");
+/// `--model DIR` must load; `--no-model` runs without one (said in the
+/// log); otherwise the shipped model.
+fn load_model(dir: Option<&Path>, no_model: bool) -> Result<Option<Model>> {
+    if no_model {
+        tracing::warn!(
+            "running without a model (--no-model): /v1/plan answers 503 model_unavailable; /v1/optimize works"
+        );
+        return Ok(None);
+    }
+    let model = Model::load_or_shipped(dir)?;
+    tracing::info!(
+        model = model.name(),
+        source = model.source(),
+        "model loaded"
+    );
     Ok(Some(model))
 }
 
@@ -233,6 +231,26 @@ mod tests {
         let mut argv = vec!["serve"];
         argv.extend_from_slice(flags);
         Wrapper::try_parse_from(argv).unwrap().args
+    }
+
+    /// The defaults written in the help are the configuration's.
+    #[test]
+    fn the_help_states_the_configuration_defaults() {
+        use clap::CommandFactory;
+        let help = crate::cli::Cli::command()
+            .find_subcommand_mut("serve")
+            .unwrap()
+            .render_long_help()
+            .to_string();
+        let d = ServiceConfig::default();
+        for text in [
+            format!("[default: {} = 4096 x 4096]", d.max_image_pixels),
+            format!("per request [default: {}]", d.max_obstacles),
+            format!("samples per request [default: {}]", d.max_samples),
+            format!("before 429 [default: {}]", d.max_queue),
+        ] {
+            assert!(help.contains(&text), "{text} not in:\n{help}");
+        }
     }
 
     #[test]

@@ -26,25 +26,27 @@ pub struct TrainArgs {
     /// Seed of initialisation, shuffling and noise.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Maximum epochs of tp1 (reconstruction).
+    /// Maximum epochs of tp1 (reconstruction) [default: 30].
     #[arg(long)]
     pub epochs_tp1: Option<usize>,
-    /// Maximum epochs of tp2 (heads; also the Direct model's only phase).
+    /// Maximum epochs of tp2 (heads; also the Direct model's only phase)
+    /// [default: 60].
     #[arg(long)]
     pub epochs_tp2: Option<usize>,
-    /// Maximum epochs of tp3 (latent tuning).
+    /// Maximum epochs of tp3 (latent tuning) [default: 20].
     #[arg(long)]
     pub epochs_tp3: Option<usize>,
-    /// Mini-batch size (the authors: 5).
+    /// Mini-batch size (the authors: 5) [default: 5].
     #[arg(long)]
     pub batch: Option<usize>,
-    /// Peak learning rate (the authors: 1e-4), cosine-decayed per phase.
+    /// Peak learning rate (the authors: 1e-4), cosine-decayed per phase
+    /// [default: 0.0001].
     #[arg(long)]
     pub lr: Option<f64>,
-    /// Covariance weight alpha of Eq. 7 / Eq. 8.
+    /// Covariance weight alpha of Eq. 7 / Eq. 8 [default: 1].
     #[arg(long)]
     pub alpha: Option<f64>,
-    /// KL weight of tp1 for VAE / cVAE.
+    /// KL weight of tp1 for VAE / cVAE [default: 0.001].
     #[arg(long)]
     pub kl_weight: Option<f64>,
     /// Weight of the task-space loss term (1 cm of final TCP error costs
@@ -55,10 +57,12 @@ pub struct TrainArgs {
     /// first phase sample (0, default, leaves it to Eq. 7).
     #[arg(long)]
     pub start_weight: Option<f64>,
-    /// Dropout rate on the latent while the heads train (0 = off).
+    /// Dropout rate on the latent while the heads train (0 = off)
+    /// [default: 0].
     #[arg(long)]
     pub latent_dropout: Option<f64>,
-    /// Epochs without validation improvement before a phase stops.
+    /// Epochs without validation improvement before a phase stops
+    /// [default: 10].
     #[arg(long)]
     pub patience: Option<usize>,
     /// Latent size.
@@ -105,4 +109,43 @@ impl TrainArgs {
 pub fn run(args: TrainArgs) -> crate::Result<()> {
     let outcome = train_for(&args.settings()?, &args.robot.load()?)?;
     crate::cli::print_json(&outcome)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::Path;
+
+    /// The defaults written in the help are the training settings'.
+    #[test]
+    fn the_help_states_the_training_defaults() {
+        use clap::CommandFactory;
+        let help = crate::cli::Cli::command()
+            .find_subcommand_mut("train")
+            .unwrap()
+            .render_long_help()
+            .to_string();
+        let s = TrainSettings::new(Path::new("d"), Path::new("o"), Arch::Ae);
+        let s = &s;
+        for (flag, value) in [
+            ("tp1 (reconstruction)", s.epochs_tp1.to_string()),
+            ("only phase)", s.epochs_tp2.to_string()),
+            ("tp3 (latent tuning)", s.epochs_tp3.to_string()),
+            ("(the authors: 5)", s.batch.to_string()),
+            ("cosine-decayed per phase", s.lr.to_string()),
+            ("Eq. 7 / Eq. 8", s.alpha.to_string()),
+            ("VAE / cVAE", s.kl_weight.to_string()),
+            ("(0 = off)", s.latent_dropout.to_string()),
+            ("before a phase stops", s.patience.to_string()),
+        ] {
+            let at = help
+                .find(flag)
+                .unwrap_or_else(|| panic!("{flag} not in the help"));
+            let window: String = help[at..].chars().take(120).collect();
+            assert!(
+                window.contains(&format!("[default: {value}]")),
+                "{flag}: default {value} not stated: {window}"
+            );
+        }
+    }
 }

@@ -1,16 +1,153 @@
-//! Demonstration files: a `time` column in seconds and one column per joint,
-//! named as in the robot's URDF, as CSV (header row; extra columns ignored)
-//! or JSON (`{"time": [...], "panda_joint1": [...], ...}`; extra keys
-//! ignored). Every cell is checked: a missing joint column, a non-numeric or
+//! Demonstration files: a `time` column and one column per joint, named as
+//! in the robot's URDF, as CSV (header row; extra columns ignored) or JSON
+//! (`{"time": [...], "panda_joint1": [...], ...}`; extra keys ignored).
+//! Every cell is checked: a missing joint column, a non-numeric or
 //! non-finite cell, or a time that does not increase is an error naming the
 //! file, the line (or index) and the column.
+//!
+//! [`ReadOptions`] adapt other exports: joint columns under other names (a
+//! `/joint_states` export's `position_0`, a namespace prefix) and times in
+//! milliseconds, microseconds or nanoseconds (ROS bag exports), detected
+//! from the recording's span unless given. A duration no robot
+//! demonstration has (outside [`MIN_DEMO_DURATION_S`] ..
+//! [`MAX_DEMO_DURATION_S`] seconds) is refused, naming the unit used.
 
 use crate::{Error, Result};
 use nalgebra::DMatrix;
 use std::path::{Path, PathBuf};
 
-/// The column holding the sample times (s).
+/// The column holding the sample times.
 pub const TIME_COLUMN: &str = "time";
+/// Shortest demonstration accepted (s).
+pub const MIN_DEMO_DURATION_S: f64 = 0.1;
+/// Longest demonstration accepted (s): the optimiser's longest duration.
+pub const MAX_DEMO_DURATION_S: f64 = crate::optim::request::MAX_DURATION_S;
+
+/// Unit of the `time` column.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum TimeUnit {
+    /// The first of s, ms, µs, ns that makes the recording's span a
+    /// plausible demonstration duration.
+    #[default]
+    Auto,
+    /// Seconds.
+    S,
+    /// Milliseconds.
+    Ms,
+    /// Microseconds.
+    Us,
+    /// Nanoseconds.
+    Ns,
+}
+
+impl TimeUnit {
+    /// The explicit units, in the order auto-detection tries them.
+    const EXPLICIT: [TimeUnit; 4] = [TimeUnit::S, TimeUnit::Ms, TimeUnit::Us, TimeUnit::Ns];
+
+    /// Seconds per unit (1 for `Auto`, which is resolved first).
+    fn seconds(self) -> f64 {
+        match self {
+            TimeUnit::Auto | TimeUnit::S => 1.0,
+            TimeUnit::Ms => 1e-3,
+            TimeUnit::Us => 1e-6,
+            TimeUnit::Ns => 1e-9,
+        }
+    }
+
+    /// The name used on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            TimeUnit::Auto => "auto",
+            TimeUnit::S => "s",
+            TimeUnit::Ms => "ms",
+            TimeUnit::Us => "us",
+            TimeUnit::Ns => "ns",
+        }
+    }
+
+    /// `auto` resolved for a recording spanning `span` of its own units.
+    fn resolve(self, span: f64) -> TimeUnit {
+        if self != TimeUnit::Auto {
+            return self;
+        }
+        Self::EXPLICIT
+            .into_iter()
+            .find(|u| (MIN_DEMO_DURATION_S..=MAX_DEMO_DURATION_S).contains(&(span * u.seconds())))
+            .unwrap_or(TimeUnit::S)
+    }
+}
+
+impl std::str::FromStr for TimeUnit {
+    type Err = String;
+    fn from_str(text: &str) -> std::result::Result<Self, String> {
+        match text {
+            "auto" => Ok(TimeUnit::Auto),
+            "s" => Ok(TimeUnit::S),
+            "ms" => Ok(TimeUnit::Ms),
+            "us" => Ok(TimeUnit::Us),
+            "ns" => Ok(TimeUnit::Ns),
+            other => Err(format!("expected auto, s, ms, us or ns, got `{other}`")),
+        }
+    }
+}
+
+/// How to read a recording that is not in the native layout.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ReadOptions {
+    /// Unit of the `time` column.
+    pub time_unit: TimeUnit,
+    /// Joint name -> the column that holds it (joints not listed keep
+    /// their own name).
+    pub joint_columns: Vec<(String, String)>,
+}
+
+impl ReadOptions {
+    /// Parse `JOINT=COLUMN,...` against the robot's `joint_names`; errors
+    /// name `flag`.
+    pub fn parse_joint_map(
+        flag: &str,
+        text: &str,
+        joint_names: &[String],
+    ) -> Result<Vec<(String, String)>> {
+        let mut out: Vec<(String, String)> = Vec::new();
+        for pair in text.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+            let (joint, column) = pair.split_once('=').ok_or_else(|| {
+                Error::invalid(flag, format!("expected JOINT=COLUMN pairs, got `{pair}`"))
+            })?;
+            let (joint, column) = (joint.trim(), column.trim());
+            if !joint_names.iter().any(|n| n == joint) {
+                return Err(Error::invalid(
+                    flag,
+                    format!(
+                        "`{joint}` is not a joint of the robot ({})",
+                        joint_names.join(", ")
+                    ),
+                ));
+            }
+            if column.is_empty() || out.iter().any(|(j, _)| j == joint) {
+                return Err(Error::invalid(
+                    flag,
+                    format!("`{joint}` needs exactly one non-empty column name"),
+                ));
+            }
+            out.push((joint.to_string(), column.to_string()));
+        }
+        Ok(out)
+    }
+
+    /// The column read for each of `joint_names`.
+    fn columns(&self, joint_names: &[String]) -> Vec<String> {
+        joint_names
+            .iter()
+            .map(|n| {
+                self.joint_columns
+                    .iter()
+                    .find(|(j, _)| j == n)
+                    .map_or_else(|| n.clone(), |(_, c)| c.clone())
+            })
+            .collect()
+    }
+}
 
 /// One recorded motion: sample times and joint positions in the robot's
 /// joint order.
@@ -112,18 +249,61 @@ fn check_times(source: &Path, time_s: &[f64]) -> Result<()> {
 }
 
 /// Read a demonstration (`.csv` or `.json`, by extension), its joint
-/// columns in the order of `joint_names`.
+/// columns in the order of `joint_names`, times in seconds.
 pub fn read_demonstration(path: &Path, joint_names: &[String]) -> Result<Demonstration> {
-    let bytes = std::fs::read(path).map_err(|e| Error::file(path, e.to_string()))?;
-    match extension(path).as_deref() {
-        Some("csv") => read_csv(path, &bytes, joint_names),
-        Some("json") => read_json(path, &bytes, joint_names),
-        _ => Err(Error::file(
-            path,
-            "unknown demonstration format: expected a .csv or .json file",
-        )),
-    }
+    read_demonstration_with(path, joint_names, &ReadOptions::default())
 }
+
+/// [`read_demonstration`] with the joints under other column names and
+/// the times in another unit (see [`ReadOptions`]).
+pub fn read_demonstration_with(
+    path: &Path,
+    joint_names: &[String],
+    options: &ReadOptions,
+) -> Result<Demonstration> {
+    let bytes = std::fs::read(path).map_err(|e| Error::file(path, e.to_string()))?;
+    let columns = options.columns(joint_names);
+    let (time, positions) = match extension(path).as_deref() {
+        Some("csv") => read_csv(path, &bytes, &columns)?,
+        Some("json") => read_json(path, &bytes, &columns)?,
+        _ => {
+            return Err(Error::file(
+                path,
+                "unknown demonstration format: expected a .csv or .json file",
+            ))
+        }
+    };
+    check_times(path, &time)?;
+    let time_s = in_seconds(path, time, options.time_unit)?;
+    Demonstration::new(path, time_s, positions)
+}
+
+/// `time` in seconds, its unit detected unless given; a duration outside
+/// the plausible range is refused, naming the unit used.
+fn in_seconds(path: &Path, time: Vec<f64>, unit: TimeUnit) -> Result<Vec<f64>> {
+    if time.len() < 2 {
+        return Ok(time); // Demonstration::new names the sample count.
+    }
+    let t0 = time.first().copied().unwrap_or(0.0);
+    let span = time.last().copied().unwrap_or(t0) - t0;
+    let unit = unit.resolve(span);
+    let scale = unit.seconds();
+    let duration = span * scale;
+    if !(MIN_DEMO_DURATION_S..=MAX_DEMO_DURATION_S).contains(&duration) {
+        return Err(Error::file(
+            path,
+            format!(
+                "column '{TIME_COLUMN}': the recording lasts {duration:.6e} s read in {} (span {span:.6e}); a demonstration lasts {MIN_DEMO_DURATION_S}..{MAX_DEMO_DURATION_S} s: give the unit with --time-unit s|ms|us|ns",
+                unit.name()
+            ),
+        ));
+    }
+    // Relative to the first sample: epoch timestamps lose no precision.
+    Ok(time.iter().map(|t| (t - t0) * scale).collect())
+}
+
+/// A recording's times, in the file's unit, and its positions.
+type Recorded = (Vec<f64>, DMatrix<f64>);
 
 fn extension(path: &Path) -> Option<String> {
     path.extension()
@@ -156,7 +336,8 @@ pub fn demonstration_paths(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
     Ok(paths)
 }
 
-fn read_csv(path: &Path, bytes: &[u8], joint_names: &[String]) -> Result<Demonstration> {
+/// Times (as written) and positions of a CSV recording.
+fn read_csv(path: &Path, bytes: &[u8], joint_names: &[String]) -> Result<Recorded> {
     let mut reader = csv::ReaderBuilder::new()
         .trim(csv::Trim::All)
         .from_reader(bytes);
@@ -196,14 +377,17 @@ fn read_csv(path: &Path, bytes: &[u8], joint_names: &[String]) -> Result<Demonst
         }
     }
     let positions = DMatrix::from_row_slice(time_s.len(), joint_names.len(), &values);
-    Demonstration::new(path, time_s, positions)
+    Ok((time_s, positions))
 }
 
 fn column_index(path: &Path, header: &[String], name: &str) -> Result<usize> {
     header.iter().position(|h| h == name).ok_or_else(|| {
         Error::file(
             path,
-            format!("column '{name}' is missing (header: {})", header.join(", ")),
+            format!(
+                "column '{name}' is missing (header: {}; joints under other names: --joint-map JOINT=COLUMN)",
+                header.join(", ")
+            ),
         )
     })
 }
@@ -212,7 +396,8 @@ fn parse_cell(cell: &str) -> Option<f64> {
     cell.parse::<f64>().ok().filter(|v| v.is_finite())
 }
 
-fn read_json(path: &Path, bytes: &[u8], joint_names: &[String]) -> Result<Demonstration> {
+/// Times (as written) and positions of a JSON recording.
+fn read_json(path: &Path, bytes: &[u8], joint_names: &[String]) -> Result<Recorded> {
     let value: serde_json::Value = serde_json::from_slice(bytes)
         .map_err(|e| Error::file(path, format!("malformed JSON: {e}")))?;
     let object = value.as_object().ok_or_else(|| {
@@ -253,7 +438,7 @@ fn read_json(path: &Path, bytes: &[u8], joint_names: &[String]) -> Result<Demons
         }
         positions.column_mut(j).copy_from_slice(&values);
     }
-    Demonstration::new(path, time_s, positions)
+    Ok((time_s, positions))
 }
 
 #[cfg(test)]

@@ -595,7 +595,7 @@ fn write_dataset(
         if overwrite && out.exists() {
             std::fs::remove_dir_all(out).map_err(|e| Error::file(out, e.to_string()))?;
         }
-        std::fs::rename(&tmp, out).map_err(|e| Error::file(out, format!("cannot write: {e}")))
+        std::fs::rename(&tmp, out).map_err(|e| Error::write(out, format!("cannot write: {e}")))
     });
     if result.is_err() {
         let _ = std::fs::remove_dir_all(&tmp);

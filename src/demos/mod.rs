@@ -21,7 +21,10 @@ pub mod fit;
 pub mod import;
 pub mod write;
 
-pub use file::{demonstration_paths, read_demonstration, Demonstration};
+pub use file::{
+    demonstration_paths, read_demonstration, read_demonstration_with, Demonstration, ReadOptions,
+    TimeUnit,
+};
 pub use fit::{fit_demonstration, fit_prior, DemoFit, PriorFit};
 pub use import::{import, ImportManifest, ImportSettings, ImportSummary};
 pub use write::{write_prior, FitReport};

@@ -120,23 +120,41 @@ pub fn save(network: &Network, dir: &Path) -> Result<()> {
 pub fn load_config(dir: &Path) -> Result<ModelConfig> {
     let path = dir.join(CONFIG_FILE);
     let text = std::fs::read_to_string(&path).map_err(|e| Error::file(&path, e.to_string()))?;
-    let config: ModelConfig = serde_json::from_str(&text)
-        .map_err(|e| Error::file(&path, format!("malformed model config: {e}")))?;
+    parse_config(&path, &text)
+}
+
+/// Parse and validate a model config's text; `path` names it in errors.
+fn parse_config(path: &Path, text: &str) -> Result<ModelConfig> {
+    let config: ModelConfig = serde_json::from_str(text)
+        .map_err(|e| Error::file(path, format!("malformed model config: {e}")))?;
     config
         .validate()
-        .map_err(|e| Error::file(&path, e.to_string()))?;
+        .map_err(|e| Error::file(path, e.to_string()))?;
     Ok(config)
 }
 
 /// Load a model directory onto `device`.
 pub fn load(dir: &Path, device: &Device) -> Result<Network> {
     let config = load_config(dir)?;
-    let network = Network::new(config, 0, device)
-        .map_err(|e| Error::Numerical(format!("cannot build network: {e}")))?;
     let path = dir.join(WEIGHTS_FILE);
     let bytes = std::fs::read(&path).map_err(|e| Error::file(&path, e.to_string()))?;
-    check_weights_checksum(network.config(), &path, &bytes)?;
-    assign(&network, &parse_tensors(&path, &bytes)?, &path)?;
+    build(config, &path, &bytes, device)
+}
+
+/// Load a model held in memory (a config's text and its weights' bytes;
+/// `dir` names them in errors) onto `device`, with the same checks as
+/// [`load`].
+pub fn load_bytes(dir: &Path, config: &str, weights: &[u8], device: &Device) -> Result<Network> {
+    let config = parse_config(&dir.join(CONFIG_FILE), config)?;
+    build(config, &dir.join(WEIGHTS_FILE), weights, device)
+}
+
+/// The network of `config` with the weights in `bytes` (read from `path`).
+fn build(config: ModelConfig, path: &Path, bytes: &[u8], device: &Device) -> Result<Network> {
+    let network = Network::new(config, 0, device)
+        .map_err(|e| Error::Numerical(format!("cannot build network: {e}")))?;
+    check_weights_checksum(network.config(), path, bytes)?;
+    assign(&network, &parse_tensors(path, bytes)?, path)?;
     Ok(network)
 }
 

@@ -1,4 +1,5 @@
-//! The inference API: [`Model::load`] a model directory, then
+//! The inference API: [`Model::load`] a model directory (or take the
+//! embedded [`Model::shipped`]), then
 //! [`Model::predict`] an image (any size) and target box into the 56-dim
 //! ProMP weight prior (block-diagonal covariance) and the latent vector.
 
@@ -18,6 +19,8 @@ use std::path::Path;
 #[derive(Clone, Debug)]
 pub struct Model {
     network: Network,
+    /// Where it was loaded from: a folder, `shipped` or `in memory`.
+    source: String,
 }
 
 /// What the network predicts for one image.
@@ -30,17 +33,57 @@ pub struct Prediction {
     pub latent: Vec<f32>,
 }
 
+/// Where the shipped model's files live in the repository; the binary
+/// carries a copy of them ([`Model::shipped`]).
+pub const SHIPPED_MODEL_DIR: &str = "models/default";
+
+/// [`Model::source`] of the embedded shipped model.
+pub const SHIPPED_SOURCE: &str = "shipped";
+
+/// The shipped model's config, embedded at build time.
+const SHIPPED_CONFIG: &str = include_str!("../../models/default/config.json");
+/// The shipped model's weights, embedded at build time.
+const SHIPPED_WEIGHTS: &[u8] = include_bytes!("../../models/default/model.safetensors");
+
 impl Model {
     /// Load `dir/model.safetensors` and `dir/config.json` onto the CPU.
     pub fn load(dir: &Path) -> Result<Model> {
         Ok(Model {
             network: checkpoint::load(dir, &Device::Cpu)?,
+            source: dir.display().to_string(),
         })
+    }
+
+    /// The shipped model (`models/default` of the source tree), embedded in
+    /// the binary like the Panda, so it is found from any working folder.
+    pub fn shipped() -> Result<Model> {
+        let dir = Path::new(SHIPPED_MODEL_DIR);
+        Ok(Model {
+            network: checkpoint::load_bytes(dir, SHIPPED_CONFIG, SHIPPED_WEIGHTS, &Device::Cpu)?,
+            source: SHIPPED_SOURCE.to_string(),
+        })
+    }
+
+    /// `dir` when given (it must load), else the shipped model.
+    pub fn load_or_shipped(dir: Option<&Path>) -> Result<Model> {
+        match dir {
+            Some(dir) => Model::load(dir),
+            None => Model::shipped(),
+        }
     }
 
     /// Wrap an in-memory network (e.g. right after training).
     pub fn from_network(network: Network) -> Model {
-        Model { network }
+        Model {
+            network,
+            source: "in memory".to_string(),
+        }
+    }
+
+    /// Where the model came from: its folder, [`SHIPPED_SOURCE`] for the
+    /// embedded one, or `in memory`.
+    pub fn source(&self) -> &str {
+        &self.source
     }
 
     /// The model's name.

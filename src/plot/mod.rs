@@ -64,7 +64,7 @@ fn temp_path(path: &Path) -> PathBuf {
 pub(crate) fn write_via_temp(path: &Path, draw: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
     let tmp = temp_path(path);
     let result = draw(&tmp)
-        .and_then(|()| std::fs::rename(&tmp, path).map_err(|e| Error::file(path, e.to_string())));
+        .and_then(|()| std::fs::rename(&tmp, path).map_err(|e| Error::write(path, e.to_string())));
     if result.is_err() {
         let _ = std::fs::remove_file(&tmp);
     }

@@ -198,7 +198,7 @@ fn split_joint_field(field: &str) -> (usize, &str) {
 pub fn write_dir(dir: &Path, index: usize, joints: &[JointAnnotation]) -> Result<()> {
     for (j, joint) in joints.iter().enumerate() {
         let folder = dir.join(format!("J{}", j + 1));
-        std::fs::create_dir_all(&folder).map_err(|e| Error::file(&folder, e.to_string()))?;
+        std::fs::create_dir_all(&folder).map_err(|e| Error::write(&folder, e.to_string()))?;
         let column: Vec<[f64; 1]> = joint.mean_weights.iter().map(|&w| [w]).collect();
         let value =
             serde_json::json!({"mean_weights": column, "L": joint.l, "configuration": index});

@@ -52,6 +52,20 @@ pub struct LinkShape {
     pub geometry: ShapeGeometry,
 }
 
+impl LinkShape {
+    /// A name for messages: the link and the kind of shape
+    /// (`panda_hand hull`, `panda_leftfinger box`).
+    pub fn describe(&self) -> String {
+        let kind = match &self.geometry {
+            ShapeGeometry::Convex(_) => "hull",
+            ShapeGeometry::Primitive(crate::geometry::Primitive::Sphere(_)) => "sphere",
+            ShapeGeometry::Primitive(crate::geometry::Primitive::Capsule(_)) => "capsule",
+            ShapeGeometry::Primitive(crate::geometry::Primitive::Box(_)) => "box",
+        };
+        format!("{} {kind}", self.link_name)
+    }
+}
+
 impl ShapeGeometry {
     /// The same shape expressed in the frame where `pose` maps its current
     /// frame (e.g. link frame to base frame).

@@ -187,15 +187,18 @@ impl From<crate::Error> for ApiError {
     fn from(e: crate::Error) -> Self {
         use crate::Error;
         let status = match &e {
-            Error::Invalid { .. } | Error::Infeasible(_) | Error::Numerical(_) => {
-                StatusCode::UNPROCESSABLE_ENTITY
-            }
+            Error::Invalid { .. }
+            | Error::Infeasible(_)
+            | Error::Numerical(_)
+            | Error::Unsolved(_) => StatusCode::UNPROCESSABLE_ENTITY,
             Error::Cancelled(_) => StatusCode::SERVICE_UNAVAILABLE,
-            Error::File { .. } | Error::Model(_) => StatusCode::INTERNAL_SERVER_ERROR,
+            Error::File { .. } | Error::Write { .. } | Error::Model(_) => {
+                StatusCode::INTERNAL_SERVER_ERROR
+            }
         };
         let code = match &e {
             Error::Cancelled(_) => "deadline_exceeded",
-            Error::File { .. } => "internal",
+            Error::File { .. } | Error::Write { .. } => "internal",
             other => other.code(),
         };
         let message = match &e {

@@ -104,9 +104,22 @@ pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
 /// Deserialize an already parsed JSON value into `T` (shape errors → 422).
 pub fn from_value<T: DeserializeOwned>(value: serde_json::Value) -> Result<T, ApiError> {
     serde_path_to_error::deserialize(value).map_err(|e| {
-        let field = e.path().to_string();
-        ApiError::invalid(field, e.inner().to_string())
+        let message = e.inner().to_string();
+        ApiError::invalid(field_of(&e.path().to_string(), &message), message)
     })
+}
+
+/// The field an error is about: serde's path, and for a missing field the
+/// field itself (serde reports the object that lacks it: `.` at the top).
+fn field_of(path: &str, message: &str) -> String {
+    let missing = message
+        .strip_prefix("missing field `")
+        .and_then(|rest| rest.split('`').next());
+    match missing {
+        Some(name) if path.is_empty() || path == "." => name.to_string(),
+        Some(name) => format!("{path}.{name}"),
+        None => path.to_string(),
+    }
 }
 
 fn path_error(e: serde_path_to_error::Error<serde_json::Error>) -> ApiError {
@@ -114,7 +127,10 @@ fn path_error(e: serde_path_to_error::Error<serde_json::Error>) -> ApiError {
     let field = e.path().to_string();
     let inner = e.into_inner();
     match inner.classify() {
-        Category::Data => ApiError::invalid(field, strip_position(&inner)),
+        Category::Data => {
+            let message = strip_position(&inner);
+            ApiError::invalid(field_of(&field, &message), message)
+        }
         Category::Syntax | Category::Eof | Category::Io => {
             ApiError::malformed_json(format!("the body is not valid JSON: {inner}"))
         }

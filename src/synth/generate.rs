@@ -406,6 +406,9 @@ pub struct GenerateSummary {
     pub elapsed_s: f64,
     /// Throughput.
     pub targets_per_s: f64,
+    /// What the user should know, e.g. an empty validation or test split
+    /// (also printed to stderr by the CLI).
+    pub warnings: Vec<String>,
 }
 
 /// Options of [`generate`].
@@ -459,7 +462,7 @@ pub fn generate(generator: &Generator, options: &GenerateOptions) -> Result<Gene
     for sub in ["images", "targets", "depth"] {
         let d = out.join(sub);
         std::fs::create_dir_all(&d)
-            .map_err(|e| Error::file(&d, format!("cannot create directory: {e}")))?;
+            .map_err(|e| Error::write(&d, format!("cannot create directory: {e}")))?;
     }
     let s = generator.settings();
     let bar = crate::progress::bar(
@@ -493,7 +496,28 @@ pub fn generate(generator: &Generator, options: &GenerateOptions) -> Result<Gene
         redrawn_configs: attempts.iter().filter(|a| **a > 1).count(),
         elapsed_s,
         targets_per_s: targets as f64 / elapsed_s.max(1e-9),
+        warnings: split_warnings(s, &split_by_config(s, options.seed)),
     })
+}
+
+/// A warning per empty validation or test split: `dpmp train` needs a
+/// validation target, `dpmp eval --split test` a test one.
+pub fn split_warnings(s: &SynthSettings, splits: &Splits) -> Vec<String> {
+    let mut out = Vec::new();
+    for (name, ids, fraction) in [
+        ("val", &splits.val, s.split.val_fraction),
+        ("test", &splits.test, s.split.test_fraction),
+    ] {
+        if ids.is_empty() {
+            let least = (0.5 / fraction.max(1e-9)).ceil() as usize;
+            out.push(format!(
+                "the {name} split is empty: splits are by configuration and {} configurations x {fraction} rounds to none (and train keeps at least one); `dpmp train` needs a val target and `dpmp eval --split test` a test one: use --configs {} or more",
+                s.configs,
+                least.max(3)
+            ));
+        }
+    }
+    out
 }
 
 fn write_config(out: &Path, output: &ConfigOutput) -> Result<()> {

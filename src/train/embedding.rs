@@ -138,7 +138,7 @@ fn dist(a: &[f64; 2], b: &[f64; 2]) -> f64 {
 /// Scatter plot of the embedding, one colour per label (PNG, atomic).
 pub fn plot_embedding(embedding: &Embedding, title: &str, path: &Path) -> Result<()> {
     crate::plot::write_via_temp(path, |tmp| {
-        draw(embedding, title, tmp).map_err(|e| Error::file(path, format!("cannot plot: {e}")))
+        draw(embedding, title, tmp).map_err(|e| Error::write(path, format!("cannot plot: {e}")))
     })
 }
 

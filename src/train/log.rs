@@ -90,14 +90,14 @@ fn append_line(path: &Path, line: &str) -> Result<()> {
         .create(true)
         .open(path)
         .map_err(|e| Error::file(path, e.to_string()))?;
-    writeln!(file, "{line}").map_err(|e| Error::file(path, e.to_string()))
+    writeln!(file, "{line}").map_err(|e| Error::write(path, e.to_string()))
 }
 
 /// Draw train (solid) and validation (dashed-looking thin) loss curves per
 /// phase on a log scale to `path` (PNG, written atomically).
 pub fn plot_loss_curves(records: &[EpochRecord], path: &Path) -> Result<()> {
     crate::plot::write_via_temp(path, |tmp| {
-        draw_curves(records, tmp).map_err(|e| Error::file(path, format!("cannot plot: {e}")))
+        draw_curves(records, tmp).map_err(|e| Error::write(path, format!("cannot plot: {e}")))
     })
 }
 

@@ -286,9 +286,7 @@ pub fn train_for(settings: &TrainSettings, robot: &crate::robot::Robot) -> Resul
     let device = Device::Cpu;
     let train_set = load_split(&settings.data, "train", &default_preprocess(settings))?;
     let val_set = load_split(&settings.data, "val", &default_preprocess(settings))?;
-    if train_set.samples.is_empty() {
-        return Err(Error::invalid("data", "the train split is empty"));
-    }
+    check_splits(settings, &train_set, &val_set)?;
     if let Some(identity) = &train_set.robot {
         let name = format!("dataset {}", settings.data.display());
         identity.check(robot, &name)?;
@@ -326,6 +324,22 @@ pub fn train_for(settings: &TrainSettings, robot: &crate::robot::Robot) -> Resul
         }
     }
     run.finish()
+}
+
+/// Training needs a target in train and one in val (early stopping and
+/// the heads' phase are judged on val); say so before anything is written.
+fn check_splits(settings: &TrainSettings, train: &Dataset, val: &Dataset) -> Result<()> {
+    let (n_train, n_val) = (train.samples.len(), val.samples.len());
+    if n_train == 0 || n_val == 0 {
+        return Err(Error::invalid(
+            "data",
+            format!(
+                "{} has {n_train} train and {n_val} val targets: training needs at least 1 in each (the splits are by plant; `dpmp data generate` needs about 10 configurations for the default 10 % val fraction, `data import` a --val-fraction that leaves a plant for val)",
+                settings.data.display()
+            ),
+        ));
+    }
+    Ok(())
 }
 
 fn default_preprocess(settings: &TrainSettings) -> crate::net::PreprocessConfig {
@@ -589,7 +603,6 @@ impl<'a> Run<'a> {
             self.state.best_val = val_loss;
             self.state.bad_epochs = 0;
             self.best = snapshot(self.network)?;
-            self.save_model()?;
         } else {
             self.state.bad_epochs += 1;
         }

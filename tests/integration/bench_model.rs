@@ -20,6 +20,8 @@ fn model_mode_runs_the_plan_pipeline_and_reports_final_tcp_error() {
     let data = dir.path().join("data");
     let mut settings = SynthSettings::new(2, 2);
     settings.demos.demos = 4;
+    // One plant for val: training refuses an empty val split.
+    (settings.split.val_fraction, settings.split.test_fraction) = (0.5, 0.0);
     let robot = Robot::panda().unwrap();
     let generator = Generator::new(settings, robot.clone()).unwrap();
     generate(

@@ -16,6 +16,7 @@ mod cli_plan;
 mod cli_prior;
 mod cli_prior_fit;
 mod data_import;
+mod first_hour;
 mod http_abuse;
 mod http_api;
 mod http_contract;

@@ -69,6 +69,19 @@ fn train_then_eval_through_the_cli() {
         assert!(eval_dir.join(f).exists(), "{f}");
     }
 
+    // Without --out the reports go beside the data, never into the model.
+    let o = dpmp(&["eval", "--model", out_s, "--data", data_s, "--split", "all"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let config: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("config.json")).unwrap()).unwrap();
+    let name = config["name"].as_str().unwrap();
+    let beside = std::path::Path::new(data_s).join(format!("eval-{name}-all"));
+    assert!(beside.join("eval.json").is_file(), "{}", beside.display());
+    assert!(
+        !out.join("eval-all").exists(),
+        "eval wrote into the model folder"
+    );
+
     let o = dpmp(&["eval", "--model", out_s, "--data", data_s, "--split", "dev"]);
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("split"));

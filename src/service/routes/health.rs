@@ -55,6 +55,9 @@ pub struct ModelStatus {
     pub loaded: bool,
     /// Its name.
     pub name: Option<String>,
+    /// Where it was loaded from: its folder, or `shipped` (the model the
+    /// binary carries); `null` without a model (`--no-model`).
+    pub source: Option<String>,
 }
 
 /// `GET /readyz`: 200 when ready, 503 with the same body otherwise.
@@ -80,7 +83,8 @@ pub async fn readyz(State(state): State<AppState>) -> (StatusCode, Json<Readines
             },
             model: ModelStatus {
                 loaded: model.is_some(),
-                name: model.map(|m| m.name().to_string()),
+                name: model.as_ref().map(|m| m.name().to_string()),
+                source: model.map(|m| m.source().to_string()),
             },
         }),
     )

@@ -423,14 +423,12 @@ fn parse_box(value: Option<Value>) -> Result<[f64; 4], ApiError> {
 }
 
 fn check_box_inside(b: &[f64; 4], image: &DynamicImage) -> Result<(), ApiError> {
-    let (w, h) = (f64::from(image.width()), f64::from(image.height()));
-    if b[0] < 0.0 || b[1] < 0.0 || b[2] > w || b[3] > h {
-        return Err(ApiError::invalid(
-            BOX_FIELD,
-            format!("the box {b:?} is not inside the {w}x{h} image"),
-        ));
-    }
-    Ok(())
+    Ok(crate::plan::check_target_box(
+        b,
+        image.width(),
+        image.height(),
+        BOX_FIELD,
+    )?)
 }
 
 #[cfg(test)]

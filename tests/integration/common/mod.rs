@@ -12,6 +12,7 @@ pub mod cli;
 pub mod http;
 pub mod json;
 pub mod net;
+pub mod process;
 pub mod requests;
 pub mod robot;
 pub mod scene;
