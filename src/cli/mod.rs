@@ -66,12 +66,9 @@ pub enum Command {
 /// `Err(Unsolved)` (exit 3) when `required` and `status` is not `optimal`.
 pub fn require_optimal(required: bool, status: crate::optim::Status) -> crate::Result<()> {
     if required && status != crate::optim::Status::Optimal {
-        let name = serde_json::to_value(status)
-            .ok()
-            .and_then(|v| v.as_str().map(str::to_string))
-            .unwrap_or_default();
         return Err(crate::Error::Unsolved(format!(
-            "the answer is `{name}`, not `optimal` (--require-optimal)"
+            "the answer is `{}`, not `optimal` (--require-optimal)",
+            status.as_str()
         )));
     }
     Ok(())

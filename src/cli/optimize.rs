@@ -87,20 +87,19 @@ pub fn plot_response(path: &Path, problem: &Problem, response: &OptimizeResponse
     let nb = prior.n_basis;
     let wm = DMatrix::from_fn(nb, prior.n_joints, |i, j| w[j * nb + i]);
     let series = [
-        JointSeries {
-            label: "prior mean ± 2σ".into(),
-            color: RGBColor(70, 110, 200),
-            mean: prior.trajectory_mean(basis),
-            std: Some(prior.trajectory_std(basis, 0.0)),
-            sigmas: 2.0,
-        },
-        JointSeries {
-            label: format!("optimised ({:?})", response.status).to_lowercase(),
-            color: RGBColor(220, 60, 40),
-            mean: basis.matrix() * wm,
-            std: None,
-            sigmas: 0.0,
-        },
+        JointSeries::band(
+            "prior mean ± 2σ".into(),
+            RGBColor(70, 110, 200),
+            prior.trajectory_mean(basis),
+            prior.trajectory_std(basis, 0.0),
+            2.0,
+        ),
+        JointSeries::line(
+            format!("optimised ({})", response.status.as_str()),
+            RGBColor(220, 60, 40),
+            basis.matrix() * wm,
+            2,
+        ),
     ];
     let limits: Vec<(f64, f64)> = problem
         .robot()
@@ -111,8 +110,9 @@ pub fn plot_response(path: &Path, problem: &Problem, response: &OptimizeResponse
     joint_panels(
         path,
         &format!(
-            "dPMP optimise: Mahalanobis {:.3}, status {:?}",
-            response.mahalanobis, response.status
+            "dPMP optimise: Mahalanobis {:.3}, status {}",
+            response.mahalanobis,
+            response.status.as_str()
         ),
         &times,
         &series,

@@ -108,6 +108,9 @@ pub struct PlotArgs {
     /// Output image (.png or .svg).
     #[arg(long)]
     pub out: PathBuf,
+    /// The robot whose joint names and limits label the panels.
+    #[command(flatten)]
+    pub robot: crate::cli::RobotArgs,
 }
 
 /// Arguments of `dpmp prior example`.
@@ -186,25 +189,58 @@ fn fit(args: &FitArgs) -> Result<()> {
             .iter()
             .map(|z| z * report.duration_s)
             .collect();
-        let series = crate::plot::JointSeries {
-            label: format!("prior of {} demonstrations, mean ± 2σ", fit.demos.len()),
-            color: plotters::style::RGBColor(200, 30, 30),
-            mean: fit.distribution.trajectory_mean(&basis),
-            std: Some(fit.distribution.trajectory_std(&basis, 0.0)),
-            sigmas: 2.0,
-        };
-        let limits: Vec<(f64, f64)> = robot.limits().iter().map(|l| (l.lower, l.upper)).collect();
+        let demo = plotters::style::RGBColor(120, 120, 120);
+        let mut series: Vec<crate::plot::JointSeries> = fit
+            .weights
+            .iter()
+            .enumerate()
+            .map(|(k, w)| {
+                let label = if k == 0 {
+                    "demonstrations (fitted)"
+                } else {
+                    ""
+                };
+                let q = crate::promp::trajectory_from_weights(&basis, w.as_slice(), robot.dof());
+                crate::plot::JointSeries::line(label.into(), demo, q, 1)
+            })
+            .collect();
+        series.push(prior_series(
+            format!("prior of {} demonstrations, mean ± 2σ", fit.demos.len()),
+            &fit.distribution,
+            &basis,
+        ));
         let title = format!("ProMP prior fitted to {}", args.out.display());
+        let limits = joint_limits(&robot);
         crate::plot::joint_panels(
             plot,
             &title,
             &times,
-            &[series],
+            &series,
             robot.joint_names(),
             Some(&limits),
         )?;
     }
     crate::cli::print_json(&report)
+}
+
+/// The prior's mean with its ±2σ band, in the one colour every prior plot uses.
+fn prior_series(
+    label: String,
+    distribution: &crate::promp::WeightDistribution,
+    basis: &Basis,
+) -> crate::plot::JointSeries {
+    crate::plot::JointSeries::band(
+        label,
+        plotters::style::RGBColor(200, 30, 30),
+        distribution.trajectory_mean(basis),
+        distribution.trajectory_std(basis, 0.0),
+        2.0,
+    )
+}
+
+/// `(lower, upper)` of every joint of `robot`.
+fn joint_limits(robot: &crate::robot::Robot) -> Vec<(f64, f64)> {
+    robot.limits().iter().map(|l| (l.lower, l.upper)).collect()
 }
 
 fn load(source: &Source) -> Result<(Prior, Basis)> {
@@ -294,22 +330,31 @@ fn plot(args: &PlotArgs) -> Result<()> {
         .iter()
         .map(|z| z * args.source.duration)
         .collect();
-    let names: Vec<String> = (1..=prior.distribution.n_joints)
-        .map(|j| format!("joint {j}"))
-        .collect();
-    let series = crate::plot::JointSeries {
-        label: "prior mean ± 2σ".into(),
-        color: plotters::style::RGBColor(200, 30, 30),
-        mean: prior.distribution.trajectory_mean(&basis),
-        std: Some(prior.distribution.trajectory_std(&basis, 0.0)),
-        sigmas: 2.0,
-    };
+    let series = prior_series("prior mean ± 2σ".into(), &prior.distribution, &basis);
     let title = format!(
         "ProMP prior {} #{}",
         args.source.annotation.display(),
         args.source.index
     );
-    crate::plot::joint_panels(&args.out, &title, &times, &[series], &names, None)?;
+    let robot = args.robot.load()?;
+    // The robot's joint names and limits when the prior is for its joints.
+    let (names, limits): (Vec<String>, Option<Vec<(f64, f64)>>) =
+        if robot.dof() == prior.distribution.n_joints {
+            (robot.joint_names().to_vec(), Some(joint_limits(&robot)))
+        } else {
+            let names = (1..=prior.distribution.n_joints)
+                .map(|j| format!("joint {j}"))
+                .collect();
+            (names, None)
+        };
+    crate::plot::joint_panels(
+        &args.out,
+        &title,
+        &times,
+        &[series],
+        &names,
+        limits.as_deref(),
+    )?;
     eprintln!("wrote {}", args.out.display());
     Ok(())
 }

@@ -17,6 +17,18 @@ pub enum Status {
     MaxIterations,
 }
 
+impl Status {
+    /// The name as the JSON writes it (`optimal`, `infeasible`,
+    /// `max_iterations`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Status::Optimal => "optimal",
+            Status::Infeasible => "infeasible",
+            Status::MaxIterations => "max_iterations",
+        }
+    }
+}
+
 /// How a trajectory is written in JSON (the request's `trajectory_format`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -352,5 +364,17 @@ impl OptimizeResponse {
             s.report.solve_ms = 0.0;
         }
         serde_json::to_string(&copy).unwrap_or_default()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn status_names_are_the_json_names() {
+        for s in [Status::Optimal, Status::Infeasible, Status::MaxIterations] {
+            assert_eq!(serde_json::to_value(s).unwrap(), s.as_str());
+        }
     }
 }

@@ -73,5 +73,5 @@ pub(crate) fn write_via_temp(path: &Path, draw: impl FnOnce(&Path) -> Result<()>
 
 /// Map any plotters error to a file error for `path`.
 pub(crate) fn plot_error<E: std::fmt::Display>(path: &Path) -> impl Fn(E) -> Error + '_ {
-    move |e| Error::file(path, format!("cannot draw plot: {e}"))
+    move |e| Error::write(path, format!("cannot draw plot: {e}"))
 }
