@@ -273,7 +273,21 @@ fn bad_depth_inputs_are_422_naming_the_field() {
         "mask_applied": true,
         "image_base64": b64(&jpeg),
     });
+    // A colour image (and its depth) not of the camera's size: the colour
+    // image is named, not the depth.
+    let small = {
+        let mut out = std::io::Cursor::new(Vec::new());
+        image::DynamicImage::ImageRgb8(image::RgbImage::new(320, 240))
+            .write_to(&mut out, image::ImageFormat::Png)
+            .unwrap();
+        out.into_inner()
+    };
     let cases = [
+        (
+            "image_base64",
+            json!({"image_base64": b64(&small), "target_box": [10, 10, 40, 40],
+                   "depth_base64": b64(&png16(320, 240, 500))}),
+        ),
         (
             "depth_base64",
             json!({"depth_base64": b64(&png16(320, 240, 500))}),

@@ -48,6 +48,8 @@ const IMAGE_FIELD: &str = "image_base64";
 const BOX_FIELD: &str = "target_box";
 const MASK_FIELD: &str = "mask_applied";
 const DEPTH_FIELD: &str = "depth_base64";
+/// The multipart part holding the colour image.
+const MULTIPART_IMAGE: &str = "image";
 const DEPTH_PART: &str = "depth";
 const SCALE_FIELD: &str = "depth_scale_m";
 const TARGET_FIELD: &str = "target_position";
@@ -64,6 +66,16 @@ enum Received {
         depth: Option<Bytes>,
         request: Option<Bytes>,
     },
+}
+
+impl Received {
+    /// The field that carries the colour image, as errors name it.
+    fn image_field(&self) -> &'static str {
+        match self {
+            Received::Json(_) => IMAGE_FIELD,
+            Received::Multipart { .. } => MULTIPART_IMAGE,
+        }
+    }
 }
 
 /// Encoded inputs of one request: (field naming it in errors, bytes).
@@ -111,9 +123,14 @@ pub async fn plan(
     let response = state
         .limiter()
         .run(deadline, move |job| -> Result<PlanResponse, ApiError> {
+            let image_field = received.image_field();
             let (input, _held) = received.into_input(&decoding)?;
             check_request_limits(&decoding.config, &input.request)?;
             let model = model.ok_or_else(ApiError::model_unavailable)?;
+            if let TargetInput::Depth(..) = input.target {
+                let (w, h) = (input.image.width(), input.image.height());
+                crate::plan::check_camera_size(&model, w, h, image_field)?;
+            }
             Ok(predict_and_optimize(
                 &model,
                 &robot,
@@ -139,7 +156,7 @@ async fn read_multipart(state: &AppState, request: Request) -> Result<Received, 
     {
         let name = part.name().unwrap_or_default().to_string();
         let slot = match name.as_str() {
-            "image" => &mut image,
+            MULTIPART_IMAGE => &mut image,
             DEPTH_PART => &mut depth,
             "request" => &mut fields,
             other => {
@@ -191,7 +208,7 @@ impl Received {
                 let request =
                     request.ok_or_else(|| malformed_multipart("missing the part `request`"))?;
                 let fields: Map<String, Value> = parse_json(&request)?;
-                for (field, part) in [(IMAGE_FIELD, "image"), (DEPTH_FIELD, DEPTH_PART)] {
+                for (field, part) in [(IMAGE_FIELD, MULTIPART_IMAGE), (DEPTH_FIELD, DEPTH_PART)] {
                     if fields.contains_key(field) {
                         return Err(ApiError::invalid(
                             field,
@@ -200,7 +217,7 @@ impl Received {
                     }
                 }
                 let encoded = Encoded {
-                    image: ("image", image.to_vec()),
+                    image: (MULTIPART_IMAGE, image.to_vec()),
                     depth: depth.map(|d| (DEPTH_PART, d.to_vec())),
                 };
                 (encoded, fields)
