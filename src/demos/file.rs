@@ -109,30 +109,47 @@ impl ReadOptions {
         text: &str,
         joint_names: &[String],
     ) -> Result<Vec<(String, String)>> {
-        let mut out: Vec<(String, String)> = Vec::new();
-        for pair in text.split(',').map(str::trim).filter(|p| !p.is_empty()) {
-            let (joint, column) = pair.split_once('=').ok_or_else(|| {
-                Error::invalid(flag, format!("expected JOINT=COLUMN pairs, got `{pair}`"))
-            })?;
-            let (joint, column) = (joint.trim(), column.trim());
-            if !joint_names.iter().any(|n| n == joint) {
+        let pairs = text
+            .split(',')
+            .map(str::trim)
+            .filter(|p| !p.is_empty())
+            .map(|pair| {
+                pair.split_once('=')
+                    .map(|(j, c)| (j.trim().to_string(), c.trim().to_string()))
+                    .ok_or_else(|| {
+                        Error::invalid(flag, format!("expected JOINT=COLUMN pairs, got `{pair}`"))
+                    })
+            })
+            .collect::<Result<Vec<_>>>()?;
+        Self::check_joint_columns(flag, pairs, joint_names)
+    }
+
+    /// `(joint, column)` pairs checked against the robot's `joint_names`:
+    /// each joint the robot's, once, with a non-empty column; errors name
+    /// `field`.
+    pub fn check_joint_columns(
+        field: &str,
+        pairs: Vec<(String, String)>,
+        joint_names: &[String],
+    ) -> Result<Vec<(String, String)>> {
+        for (k, (joint, column)) in pairs.iter().enumerate() {
+            if !joint_names.contains(joint) {
                 return Err(Error::invalid(
-                    flag,
+                    field,
                     format!(
                         "`{joint}` is not a joint of the robot ({})",
                         joint_names.join(", ")
                     ),
                 ));
             }
-            if column.is_empty() || out.iter().any(|(j, _)| j == joint) {
+            if column.is_empty() || pairs[..k].iter().any(|(j, _)| j == joint) {
                 return Err(Error::invalid(
-                    flag,
+                    field,
                     format!("`{joint}` needs exactly one non-empty column name"),
                 ));
             }
-            out.push((joint.to_string(), column.to_string()));
         }
-        Ok(out)
+        Ok(pairs)
     }
 
     /// The column read for each of `joint_names`.
@@ -293,7 +310,7 @@ fn in_seconds(path: &Path, time: Vec<f64>, unit: TimeUnit) -> Result<Vec<f64>> {
         return Err(Error::file(
             path,
             format!(
-                "column '{TIME_COLUMN}': the recording lasts {duration:.6e} s read in {} (span {span:.6e}); a demonstration lasts {MIN_DEMO_DURATION_S}..{MAX_DEMO_DURATION_S} s: give the unit with --time-unit s|ms|us|ns",
+                "column '{TIME_COLUMN}': the recording lasts {duration:.6e} s read in {} (span {span:.6e}); a demonstration lasts {MIN_DEMO_DURATION_S}..{MAX_DEMO_DURATION_S} s: give the unit (--time-unit s|ms|us|ns, or an import manifest's time_unit)",
                 unit.name()
             ),
         ));

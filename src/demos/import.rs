@@ -27,7 +27,7 @@
 //! temporary folder beside `--out` and renames it, so `--out` holds a whole
 //! dataset or nothing.
 
-use super::{fit_prior, read_demonstration};
+use super::{fit_prior, read_demonstration_with, ReadOptions};
 use crate::perception::{locate_target, Camera, CameraModel, DepthImage};
 use crate::promp::{annotation, Basis, PrompConfig, WeightDistribution};
 use crate::robot::Robot;
@@ -52,6 +52,14 @@ pub struct ImportManifest {
     /// Metres per unit of the depth images (default 0.001).
     #[serde(default)]
     pub depth_scale_m: Option<f64>,
+    /// Unit of the recordings' `time` column: `auto` (default), `s`, `ms`,
+    /// `us` or `ns` (see [`TimeUnit`](super::TimeUnit)).
+    #[serde(default)]
+    pub time_unit: Option<String>,
+    /// Joints recorded under other column names: `{"panda_joint1":
+    /// "position_0", ...}` (joints not listed keep their names).
+    #[serde(default)]
+    pub joint_columns: std::collections::BTreeMap<String, String>,
     /// The targets.
     pub targets: Vec<ImportTarget>,
 }
@@ -191,6 +199,8 @@ pub fn import(
         ));
     }
     check_ids_and_groups(&manifest, manifest_path)?;
+    let read =
+        read_options(&manifest, robot).map_err(|e| Error::file(manifest_path, e.to_string()))?;
     let group_names = group_names(&manifest);
     let groups = group_indices(&manifest, &group_names);
     let context = Context {
@@ -199,6 +209,7 @@ pub fn import(
         basis: &basis,
         camera: &camera,
         scale,
+        read: &read,
     };
     let mut prepared = Vec::new();
     let mut problems = Vec::new();
@@ -296,6 +307,28 @@ fn read_manifest(path: &Path) -> Result<ImportManifest> {
     Ok(manifest)
 }
 
+/// The manifest's `time_unit` and `joint_columns` as reading options;
+/// errors name the field.
+fn read_options(manifest: &ImportManifest, robot: &Robot) -> Result<ReadOptions> {
+    let time_unit = match &manifest.time_unit {
+        Some(text) => text
+            .parse()
+            .map_err(|e: String| Error::invalid("time_unit", e))?,
+        None => super::TimeUnit::Auto,
+    };
+    let pairs = manifest
+        .joint_columns
+        .iter()
+        .map(|(j, c)| (j.clone(), c.clone()))
+        .collect();
+    let joint_columns =
+        ReadOptions::check_joint_columns("joint_columns", pairs, robot.joint_names())?;
+    Ok(ReadOptions {
+        time_unit,
+        joint_columns,
+    })
+}
+
 /// Every id well-formed and unique, every group named; errors name the
 /// target.
 fn check_ids_and_groups(manifest: &ImportManifest, path: &Path) -> Result<()> {
@@ -384,6 +417,7 @@ struct Context<'a> {
     basis: &'a Basis,
     camera: &'a Camera,
     scale: f64,
+    read: &'a ReadOptions,
 }
 
 impl Context<'_> {
@@ -497,7 +531,7 @@ impl Context<'_> {
     fn prior_from_demos(&self, files: &[String]) -> Result<TargetPrior> {
         let recordings = files
             .iter()
-            .map(|f| read_demonstration(&self.path(f), self.robot.joint_names()))
+            .map(|f| read_demonstration_with(&self.path(f), self.robot.joint_names(), self.read))
             .collect::<Result<Vec<_>>>()?;
         let fit = fit_prior(self.basis, self.robot, &recordings)?;
         let n = self.robot.dof();

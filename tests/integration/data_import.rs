@@ -271,6 +271,21 @@ fn bad_manifests_name_every_bad_target_and_write_nothing() {
             vec!["targets[0]", "colour"],
         ),
         (
+            "time unit",
+            Box::new(|m| m["time_unit"] = json!("minutes")),
+            vec!["time_unit", "expected auto, s, ms, us or ns"],
+        ),
+        (
+            "joint columns",
+            Box::new(|m| m["joint_columns"] = json!({"elbow": "position_3"})),
+            vec!["joint_columns", "`elbow` is not a joint"],
+        ),
+        (
+            "recorded in ms read as ns",
+            Box::new(|m| m["time_unit"] = json!("ns")),
+            vec!["column 'time'", "--time-unit"],
+        ),
+        (
             "neither",
             Box::new(|m| {
                 m["targets"][5]
@@ -296,7 +311,7 @@ fn bad_manifests_name_every_bad_target_and_write_nothing() {
             "--out",
             arg(&out),
         ]);
-        assert!(!o.status.success(), "{name}");
+        assert_eq!(o.status.code(), Some(2), "{name}: {}", stderr(&o));
         let err = stderr(&o);
         for e in expected {
             assert!(err.contains(e), "{name}: {e:?} not in {err}");
