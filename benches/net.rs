@@ -148,6 +148,7 @@ fn plan(c: &mut Criterion) {
                 goal_standoff_m: None,
                 request: request.clone(),
                 approach: None,
+                camera: None,
             };
             black_box(
                 predict_and_optimize(model, &robot, input, &Default::default()).expect("plan"),

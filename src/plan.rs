@@ -27,7 +27,7 @@
 
 use crate::net::Model;
 use crate::optim::{optimize_with, Goal, OptimizeRequest, OptimizeResponse, SolveControl};
-use crate::perception::{locate_target, Camera, DepthImage};
+use crate::perception::{locate_target, Camera, CameraModel, DepthImage};
 use crate::promp::distribution::matrix_rows;
 use crate::promp::{Basis, FinalPointObservation, WeightDistribution};
 use crate::robot::Robot;
@@ -76,6 +76,9 @@ pub struct PlanInput {
     pub request: OptimizeRequest,
     /// An approach direction for the goal derived from the target.
     pub approach: Option<GoalApproach>,
+    /// The camera that took the images, when not the model's (its
+    /// intrinsics back-project the depth image).
+    pub camera: Option<CameraModel>,
 }
 
 /// The approach direction of a goal derived from the 3-D target (the
@@ -155,7 +158,10 @@ pub fn predict_and_optimize(
     ctl: &SolveControl,
 ) -> Result<PlanResponse> {
     let mut request = input.request;
-    let located = locate(model, robot, &input.target, &input.target_box)?;
+    let camera = input
+        .camera
+        .unwrap_or_else(|| model.config().camera_model());
+    let located = locate(&camera, robot, &input.target, &input.target_box)?;
     let depth_m = located.as_ref().map(|l| l.camera_depth_m);
     let target = match located {
         Some(located) => {
@@ -253,7 +259,7 @@ struct Located {
 
 /// The berry centre, if the input has one.
 fn locate(
-    model: &Model,
+    camera: &CameraModel,
     robot: &Robot,
     target: &TargetInput,
     target_box: &[f64; 4],
@@ -261,7 +267,7 @@ fn locate(
     if let TargetInput::None = target {
         return Ok(None);
     }
-    let camera = Camera::at_home(&model.config().camera_model(), robot)?;
+    let camera = Camera::at_home(camera, robot)?;
     match target {
         TargetInput::None => Ok(None),
         TargetInput::Position(p) => {
@@ -316,21 +322,33 @@ pub fn check_target_box(b: &[f64; 4], width: u32, height: u32, field: &str) -> R
     Ok(())
 }
 
-/// Depth back-projection uses the model's camera: the colour image (and
-/// the aligned depth image) must be of its size; errors name `field` (the
-/// colour image's input).
-pub fn check_camera_size(model: &Model, width: u32, height: u32, field: &str) -> Result<()> {
-    let camera = model.config().camera_model().intrinsics;
-    if (camera.width, camera.height) == (width, height) {
+/// Depth back-projection uses the camera's intrinsics: the colour image
+/// (and the aligned depth image) must be of its size; errors name `field`
+/// (the colour image's input). `camera`: the request's, else the model's.
+pub fn check_camera_size(
+    model: &Model,
+    camera: Option<&CameraModel>,
+    width: u32,
+    height: u32,
+    field: &str,
+) -> Result<()> {
+    let (given, k) = match camera {
+        Some(c) => (true, c.intrinsics),
+        None => (false, model.config().camera_model().intrinsics),
+    };
+    if (k.width, k.height) == (width, height) {
         return Ok(());
     }
+    let whose = if given {
+        "the given camera".to_string()
+    } else {
+        format!("model {}'s camera", model.name())
+    };
     Err(Error::invalid(
         field,
         format!(
-            "the colour image is {width}x{height}, but model {}'s camera is {}x{}: depth is back-projected with that camera's intrinsics, so send the camera's full images (or a 3-D target position instead of depth)",
-            model.name(),
-            camera.width,
-            camera.height
+            "the colour image is {width}x{height}, but {whose} is {}x{}: depth is back-projected with that camera's intrinsics, so send its full images, give the camera that took them (`camera` / --camera), or a 3-D target position instead of depth",
+            k.width, k.height
         ),
     ))
 }

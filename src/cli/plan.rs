@@ -75,6 +75,11 @@ pub struct PlanArgs {
     /// Exit 3 (after printing the answer) when its status is not `optimal`.
     #[arg(long)]
     pub require_optimal: bool,
+    /// The camera that took the images, when not the model's: JSON
+    /// `{"intrinsics": {"width", "height", "fx", "fy", "cx", "cy"},
+    /// "mount_back_m", "mount_up_m"}` (the model config's `camera`).
+    #[arg(long)]
+    pub camera: Option<PathBuf>,
 }
 
 /// Run `dpmp plan`.
@@ -109,8 +114,19 @@ pub fn run(args: PlanArgs) -> Result<()> {
     let model = Arc::new(Model::load_or_shipped(args.model.as_deref())?);
     let robot = Arc::new(args.robot.load()?);
     model.config().check_robot(&robot)?;
+    let camera = match &args.camera {
+        Some(path) => {
+            let camera: crate::perception::CameraModel = crate::fsio::read_json(path)?;
+            camera
+                .validate("camera")
+                .map_err(|e| Error::file(path, e.to_string()))?;
+            Some(camera)
+        }
+        None => None,
+    };
     if args.depth.is_some() {
-        crate::plan::check_camera_size(&model, image.width(), image.height(), "--image")?;
+        let (w, h) = (image.width(), image.height());
+        crate::plan::check_camera_size(&model, camera.as_ref(), w, h, "--image")?;
     }
     let target = target_input(&args, &image)?;
     let input = PlanInput {
@@ -121,6 +137,7 @@ pub fn run(args: PlanArgs) -> Result<()> {
         goal_standoff_m: args.goal_standoff,
         request,
         approach: approach(&args)?,
+        camera,
     };
     let response = predict_and_optimize(&model, &robot, input, &Default::default())?;
     crate::cli::print_json(&response)?;

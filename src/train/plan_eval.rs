@@ -72,6 +72,9 @@ pub fn evaluate_plans(
 ) -> Result<Option<PlanEval>> {
     let manifest = dataset::load_manifest(dir)?;
     let scale = manifest.depth_scale_m();
+    // The dataset's camera took its images (an imported dataset's may not
+    // be the model's).
+    let camera = manifest.camera_model();
     let entries: Vec<&TargetEntry> = manifest
         .split(split)?
         .into_iter()
@@ -82,7 +85,7 @@ pub fn evaluate_plans(
     }
     let outcomes = entries
         .par_iter()
-        .map(|entry| plan_one(model, robot, dir, entry, scale))
+        .map(|entry| plan_one(model, robot, dir, entry, scale, camera))
         .collect::<Result<Vec<_>>>()?;
     let mut finals: Vec<f64> = outcomes.iter().map(|o| o.final_error).collect();
     let mut targets: Vec<f64> = outcomes.iter().filter_map(|o| o.target_error).collect();
@@ -107,6 +110,7 @@ fn plan_one(
     dir: &Path,
     entry: &TargetEntry,
     scale: f64,
+    camera: crate::perception::CameraModel,
 ) -> Result<Outcome> {
     let record = dataset::load_record(dir, entry)?;
     let image = image::DynamicImage::ImageRgb8(dataset::load_image(dir, entry)?);
@@ -128,6 +132,7 @@ fn plan_one(
         goal_standoff_m: None,
         request,
         approach: None,
+        camera: Some(camera),
     };
     let answer = predict_and_optimize(model, robot, input, &Default::default())?;
     let last = answer

@@ -328,6 +328,22 @@ fn plan_from_another_folder_uses_the_shipped_model_and_checks_the_box_first() {
         "{}",
         stderr(&o)
     );
+    // A camera file that is not one is named.
+    let camera = dir.path().join("camera.json");
+    std::fs::write(&camera, r#"{"intrinsics": {"width": 320}}"#).unwrap();
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_dpmp"))
+        .args([
+            "plan",
+            "--image",
+            small.to_str().unwrap(),
+            "--box",
+            "10,10,40,40",
+        ])
+        .args(["--camera", camera.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("camera.json"), "{}", stderr(&o));
     let o = run_in(&b.join(","));
     assert!(o.status.success(), "{}", stderr(&o));
     let answer: Value = serde_json::from_slice(&o.stdout).unwrap();

@@ -471,3 +471,73 @@ fn a_model_predicting_an_invalid_prior_is_a_server_error_not_the_clients() {
     assert_eq!((status, code(&answer)), (500, "model_error"), "{answer}");
     assert_eq!(field(&answer), None, "{answer}");
 }
+
+/// Images from another camera plan with that camera's intrinsics: the
+/// generated target at half resolution (every second pixel of colour and
+/// depth) with the intrinsics halved back-projects to the same berry the
+/// full-size images locate.
+#[test]
+fn a_given_camera_back_projects_its_own_images() {
+    let DepthPlan {
+        _server,
+        c,
+        url,
+        jpeg,
+        depth,
+        record,
+        fields,
+        answer,
+        ..
+    } = plan_generated_target_with_depth();
+    let full = image::load_from_memory(&jpeg).unwrap().to_rgb8();
+    let half = image::RgbImage::from_fn(full.width() / 2, full.height() / 2, |x, y| {
+        *full.get_pixel(2 * x, 2 * y)
+    });
+    let mut half_png = Vec::new();
+    image::DynamicImage::ImageRgb8(half)
+        .write_to(
+            &mut std::io::Cursor::new(&mut half_png),
+            image::ImageFormat::Png,
+        )
+        .unwrap();
+    let d = dpmp::perception::DepthImage::decode_png(&depth, 0.001, "depth").unwrap();
+    let (w, h) = (d.width() / 2, d.height() / 2);
+    let units: Vec<u16> = (0..h)
+        .flat_map(|y| (0..w).map(move |x| (x, y)))
+        .map(|(x, y)| d.units()[(2 * y * d.width() + 2 * x) as usize])
+        .collect();
+    let half_depth = dpmp::perception::DepthImage::new(w, h, 0.001, units, "d")
+        .unwrap()
+        .encode_png()
+        .unwrap();
+    let model = dpmp::net::Model::shipped().unwrap();
+    let mut camera = serde_json::to_value(model.config().camera_model()).unwrap();
+    for k in ["fx", "fy", "cx", "cy"] {
+        let v = camera["intrinsics"][k].as_f64().unwrap();
+        camera["intrinsics"][k] = json!(v / 2.0);
+    }
+    camera["intrinsics"]["width"] = json!(w);
+    camera["intrinsics"]["height"] = json!(h);
+    let mut body = fields.clone();
+    body["target_box"] = json!(record.bbox.map(|v| v / 2.0));
+    body["image_base64"] = json!(b64(&half_png));
+    body["depth_base64"] = json!(b64(&half_depth));
+    let (s, without) = post_json(&c, &url, body.to_string());
+    assert_eq!(
+        (s, field(&without)),
+        (422, Some("image_base64")),
+        "{without}"
+    );
+    body["camera"] = camera.clone();
+    let (s, with) = post_json(&c, &url, body.to_string());
+    assert_eq!(s, 200, "{with}");
+    let here = numbers(&with["target"]["position"]);
+    let there = numbers(&answer["target"]["position"]);
+    assert!(distance(&here, &there) < 0.005, "{here:?} vs {there:?}");
+    // A bad camera is named down to its field.
+    camera["intrinsics"]["fx"] = json!(-1.0);
+    body["camera"] = camera;
+    let (s, bad) = post_json(&c, &url, body.to_string());
+    assert_eq!(s, 422, "{bad}");
+    assert!(field(&bad).unwrap().starts_with("camera"), "{bad}");
+}

@@ -22,6 +22,7 @@
 use super::optimize::{check_request_limits, record_solve, solve_control};
 use crate::optim::OptimizeRequest;
 use crate::perception::depth::{DepthImage, DEFAULT_DEPTH_SCALE_M};
+use crate::perception::CameraModel;
 use crate::plan::{
     check_target_position, predict_and_optimize, GoalApproach, PlanInput, PlanResponse, TargetInput,
 };
@@ -54,6 +55,7 @@ const DEPTH_PART: &str = "depth";
 const SCALE_FIELD: &str = "depth_scale_m";
 const TARGET_FIELD: &str = "target_position";
 const STANDOFF_FIELD: &str = "goal_standoff_m";
+const CAMERA_FIELD: &str = "camera";
 
 /// A request as received, nothing parsed or decoded yet: that is CPU work
 /// and runs in the request's job.
@@ -129,7 +131,8 @@ pub async fn plan(
             let model = model.ok_or_else(ApiError::model_unavailable)?;
             if let TargetInput::Depth(..) = input.target {
                 let (w, h) = (input.image.width(), input.image.height());
-                crate::plan::check_camera_size(&model, w, h, image_field)?;
+                let camera = input.camera.as_ref();
+                crate::plan::check_camera_size(&model, camera, w, h, image_field)?;
             }
             Ok(predict_and_optimize(
                 &model,
@@ -283,6 +286,7 @@ fn finish_input(
     let target_position = optional_position(&mut fields)?;
     let goal_standoff_m = optional_number(&mut fields, STANDOFF_FIELD)?;
     let approach = goal_approach(&mut fields)?;
+    let camera = take_camera(&mut fields)?;
     fields.insert(
         "prior".to_string(),
         serde_json::json!({"mean": [], "cov": []}),
@@ -334,8 +338,24 @@ fn finish_input(
         goal_standoff_m,
         request,
         approach,
+        camera,
     };
     Ok((input, held))
+}
+
+/// The optional `camera` (intrinsics and mount), validated.
+fn take_camera(fields: &mut Map<String, Value>) -> Result<Option<CameraModel>, ApiError> {
+    let Some(value) = fields.remove(CAMERA_FIELD) else {
+        return Ok(None);
+    };
+    let camera: CameraModel = serde_path_to_error::deserialize(value).map_err(|e| {
+        ApiError::invalid(
+            format!("{CAMERA_FIELD}.{}", e.path()),
+            e.inner().to_string(),
+        )
+    })?;
+    camera.validate(CAMERA_FIELD)?;
+    Ok(Some(camera))
 }
 
 /// A `goal` without a `position` (only with a derived goal): its approach
