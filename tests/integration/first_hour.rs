@@ -309,17 +309,19 @@ fn plan_from_another_folder_uses_the_shipped_model_and_checks_the_box_first() {
         .resize_exact(320, 240, image::imageops::FilterType::Triangle)
         .save(&small)
         .unwrap();
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_dpmp"))
-        .args([
+    let plan_small = |flag: &str, file: &std::path::Path| {
+        let small = small.to_str().unwrap();
+        dpmp(&[
             "plan",
             "--image",
-            small.to_str().unwrap(),
+            small,
             "--box",
             "10,10,40,40",
+            flag,
+            file.to_str().unwrap(),
         ])
-        .args(["--depth", depth.to_str().unwrap()])
-        .output()
-        .unwrap();
+    };
+    let o = plan_small("--depth", &depth);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(
         stderr(&o).contains("--image")
@@ -331,17 +333,7 @@ fn plan_from_another_folder_uses_the_shipped_model_and_checks_the_box_first() {
     // A camera file that is not one is named.
     let camera = dir.path().join("camera.json");
     std::fs::write(&camera, r#"{"intrinsics": {"width": 320}}"#).unwrap();
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_dpmp"))
-        .args([
-            "plan",
-            "--image",
-            small.to_str().unwrap(),
-            "--box",
-            "10,10,40,40",
-        ])
-        .args(["--camera", camera.to_str().unwrap()])
-        .output()
-        .unwrap();
+    let o = plan_small("--camera", &camera);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(stderr(&o).contains("camera.json"), "{}", stderr(&o));
     let o = run_in(&b.join(","));
