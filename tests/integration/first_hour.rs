@@ -192,6 +192,12 @@ fn every_invalid_input_exits_2_and_an_unwanted_answer_3() {
     let bad_csv = dir.path().join("bad.csv");
     std::fs::write(&bad_csv, "time,panda_joint1\n0,0.1\n1,x\n").unwrap();
     let prior_out = dir.path().join("p");
+    let beyond = dir.path().join("beyond.csv");
+    let header = "time,panda_joint1,panda_joint2,panda_joint3,panda_joint4,panda_joint5,panda_joint6,panda_joint7";
+    let rows: String = (0..20)
+        .map(|i| format!("{},5.0,-0.785,0,-2.356,0,1.571,0.785\n", i as f64 * 0.1))
+        .collect();
+    std::fs::write(&beyond, format!("{header}\n{rows}")).unwrap();
     let cases: Vec<Vec<&str>> = vec![
         vec!["optimize", "--request", missing_s],
         vec![
@@ -215,16 +221,22 @@ fn every_invalid_input_exits_2_and_an_unwanted_answer_3() {
             prior_out.to_str().unwrap(),
         ],
         vec!["eval", "--model", missing_s, "--data", missing_s],
+        vec![
+            "prior",
+            "fit",
+            "--demos",
+            beyond.to_str().unwrap(),
+            "--out",
+            prior_out.to_str().unwrap(),
+        ],
         vec!["plan", "--image", missing_s, "--box", "1,2,3,4"],
     ];
     for args in &cases {
         let o = dpmp(args);
         assert_eq!(o.status.code(), Some(2), "{args:?}: {}", stderr(&o));
-        assert!(
-            stderr(&o).contains("missing") || stderr(&o).contains("bad.csv"),
-            "{args:?}: {}",
-            stderr(&o)
-        );
+        let named = ["missing", "bad.csv", "beyond.csv"];
+        let err = stderr(&o);
+        assert!(named.iter().any(|n| err.contains(n)), "{args:?}: {err}");
     }
     // IK to a point out of reach: the answer is printed, exit 0 or 3 on request.
     let far = ["robot", "ik", "--position", "3,0,0.5"];
@@ -321,6 +333,24 @@ fn plan_from_another_folder_uses_the_shipped_model_and_checks_the_box_first() {
             file.to_str().unwrap(),
         ])
     };
+    // An 8-bit depth image is refused as input (2), naming the file.
+    let depth8 = dir.path().join("depth8.png");
+    image::GrayImage::new(640, 480).save(&depth8).unwrap();
+    let o = dpmp(&[
+        "plan",
+        "--image",
+        image.to_str().unwrap(),
+        "--box",
+        &b.join(","),
+        "--depth",
+        depth8.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("depth8.png") && stderr(&o).contains("16-bit"),
+        "{}",
+        stderr(&o)
+    );
     let o = plan_small("--depth", &depth);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(
