@@ -486,7 +486,8 @@ pub fn generate(generator: &Generator, options: &GenerateOptions) -> Result<Gene
             .collect::<Result<Vec<usize>>>()
     })?;
     bar.finish_and_clear();
-    dataset::write_json_atomic(&manifest_path, &generator.manifest(options.seed))?;
+    let manifest = generator.manifest(options.seed);
+    dataset::write_json_atomic(&manifest_path, &manifest)?;
     let elapsed_s = started.elapsed().as_secs_f64();
     let targets = s.configs * s.berries_per_config;
     Ok(GenerateSummary {
@@ -496,7 +497,7 @@ pub fn generate(generator: &Generator, options: &GenerateOptions) -> Result<Gene
         redrawn_configs: attempts.iter().filter(|a| **a > 1).count(),
         elapsed_s,
         targets_per_s: targets as f64 / elapsed_s.max(1e-9),
-        warnings: split_warnings(s, &split_by_config(s, options.seed)),
+        warnings: split_warnings(s, &manifest.splits),
     })
 }
 
