@@ -95,7 +95,7 @@ pub struct GoalApproach {
 }
 
 fn default_approach_tolerance() -> f64 {
-    crate::optim::request::DEFAULT_APPROACH_TOLERANCE_RAD
+    crate::optim::task::DEFAULT_APPROACH_TOLERANCE_RAD
 }
 
 /// The predicted prior as trajectories (`T x dof`, rows are time samples).

@@ -149,7 +149,7 @@ fn label(args: LabelArgs) -> Result<()> {
     if args.count == 0 {
         return Err(Error::invalid("--count", "must be at least 1"));
     }
-    let most = crate::optim::restart::MAX_RESTARTS;
+    let most = crate::optim::seeds::restart::MAX_RESTARTS;
     if args.restarts > most {
         return Err(Error::invalid(
             "--restarts",

@@ -54,7 +54,7 @@ pub struct PlanArgs {
     #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
     pub approach_axis: Option<Vec<f64>>,
     /// Allowed angle to --approach-axis (rad).
-    #[arg(long, default_value_t = crate::optim::request::DEFAULT_APPROACH_TOLERANCE_RAD)]
+    #[arg(long, default_value_t = crate::optim::task::DEFAULT_APPROACH_TOLERANCE_RAD)]
     pub approach_tolerance: f64,
     /// Scene file `{"obstacles": [...]}` (request schema).
     #[arg(long)]

@@ -21,7 +21,7 @@ pub const TIME_COLUMN: &str = "time";
 /// Shortest demonstration accepted (s).
 pub const MIN_DEMO_DURATION_S: f64 = 0.1;
 /// Longest demonstration accepted (s): the optimiser's longest duration.
-pub const MAX_DEMO_DURATION_S: f64 = crate::optim::request::MAX_DURATION_S;
+pub const MAX_DEMO_DURATION_S: f64 = crate::optim::task::MAX_DURATION_S;
 
 /// Unit of the `time` column.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]

@@ -4,64 +4,63 @@
 //! jerk limits, rest at both ends, the start configuration, the goal (a
 //! position and an approach direction) and the clearance to every obstacle.
 //!
-//! - [`request`] — [`OptimizeRequest`] (DESIGN.md's JSON), [`SolverOptions`],
-//!   the request limits, and the validation into a [`Problem`].
-//! - [`problem`] — the whitened [`Problem`] (plain data).
-//! - [`whiten`] — `Σ + λI = L Lᵀ`, `w = μ + L z`: cost `|z|²`.
-//! - [`phases`] — joint positions and their time derivatives as rows in `z` per phase.
-//! - [`linear`] — limit rows (position to jerk), end conditions, opt-in weight bounds.
-//! - [`duration`] — the closed-form duration bound from the rate limits: a proof that a request is too short.
-//! - [`qp`] — one QP in Clarabel (CSC built directly).
-//! - [`dual_active_set`] — the warm-started inner QP solver (Goldfarb–Idnani).
-//! - [`qp_active_set`] — a [`qp::Qp`] solved by it (the SCP's intermediate steps).
-//! - [`nullspace`] — equality rows eliminated before Clarabel sees a QP.
-//! - [`scp`] — the entry points of the SCP: solve towards the prior mean, project a draw.
-//! - `scp_state` — the driver's state struct and its named steps.
-//! - [`solution`] — [`Solution`], [`SolveStats`], [`SolveControl`].
-//! - [`tolerances`] — every tolerance and convergence threshold.
-//! - [`restart`] — restarts from seeded prior draws after a local minimum.
-//! - `evaluate` — one iterate on the optimisation phases: clearances, goal, merit.
-//! - `subproblem` — one QP: linearisation, working set, constraint generation.
-//! - [`verify`] — dense verification and the trajectory output.
-//! - [`working_set`] — which candidate rows each QP starts with and gains.
-//! - [`diagnose`] — infeasibility diagnosis before solving.
-//! - [`sampling`] — `samples: N` projected prior draws.
-//! - [`report`] — the response types.
+//! The folders follow a request through the optimiser:
+//!
+//! - [`request`] — [`OptimizeRequest`] (DESIGN.md's JSON), the request
+//!   limits, and the validation into a [`Problem`].
+//! - [`task`] — what the request asks besides its prior: [`Goal`],
+//!   [`Boundary`], [`SolverOptions`] and the bounds their fields are checked
+//!   against.
+//! - [`problem`] — the whitened [`Problem`] (plain data) and its parts:
+//!   [`problem::whiten`] (`Σ + λI = L Lᵀ`, `w = μ + L z`: cost `|z|²`),
+//!   [`problem::phases`] (joint positions and their time derivatives as rows
+//!   in `z` per phase), [`problem::linear`] (limit rows, end conditions,
+//!   opt-in weight bounds).
+//! - [`infeasible`] — proofs before any solve that a request cannot be met:
+//!   the joint-space diagnosis and the closed-form duration bound.
+//! - [`scp`] — the sequential convex programme: its entry points, the
+//!   driver's state struct with one method per decision (`scp::state`), one
+//!   iterate evaluated on the optimisation phases (`scp::evaluate`), one QP's
+//!   linearisation and constraint generation (`scp::subproblem`) and the
+//!   rows each QP starts with ([`scp::working_set`]).
+//! - [`qp`] — one QP in Clarabel (CSC built directly), the warm-started
+//!   dual active-set method ([`qp::dual_active_set`], Goldfarb–Idnani) that
+//!   solves the intermediate ones ([`qp::active_set`]), and the null-space
+//!   elimination of equality rows ([`qp::nullspace`]).
+//! - [`verify`] — dense verification, the continuous-motion certificate
+//!   ([`verify::continuous`]) and the trajectory output.
+//! - [`seeds`] — restarts from seeded prior draws after a local minimum, and
+//!   the `samples: N` projected prior draws.
+//! - [`solution`] — [`Solution`], [`SolveStats`], [`SolveControl`];
+//!   [`report`] — the response types; [`tolerances`] — every tolerance and
+//!   convergence threshold.
+//!
+//! The arrows run one way: `request` → `task`, `problem` → `scp` / `verify`
+//! → `qp`; nothing below `request` imports it.
 //!
 //! Determinism: the same request gives the same response bytes except for
 //! the wall-clock `solve_ms` fields.
 
-pub mod continuous;
-pub mod diagnose;
-pub mod dual_active_set;
-pub mod duration;
-mod evaluate;
-pub mod linear;
-pub mod nullspace;
-pub mod phases;
+pub mod infeasible;
 pub mod problem;
 pub mod qp;
-pub mod qp_active_set;
 pub mod report;
 pub mod request;
-pub mod restart;
-pub mod sampling;
 pub mod scp;
-mod scp_state;
+pub mod seeds;
 pub mod solution;
-mod subproblem;
+pub mod task;
 pub mod tolerances;
 pub mod verify;
-pub mod whiten;
-pub mod working_set;
 
 pub use problem::Problem;
 pub use report::{
     Closest, JointTrajectory, OptimizeResponse, SampleResult, Status, TrajectoryPoint,
     TrajectoryReport,
 };
-pub use request::{Boundary, Goal, InnerSolver, OptimizeRequest, PriorSpec, SolverOptions};
+pub use request::{OptimizeRequest, PriorSpec};
 pub use solution::{Solution, SolveControl, SolveStats};
+pub use task::{Boundary, Goal, InnerSolver, SolverOptions};
 pub use tolerances::FEASIBILITY_TOLERANCE;
 
 use crate::robot::Robot;
@@ -144,10 +143,10 @@ fn infeasible_at_prior_mean(
 }
 
 /// The first duration, from the proven lower bound up by
-/// [`duration::DURATION_SEARCH_GROWTH`] each try, at which a verified
+/// [`infeasible::duration::DURATION_SEARCH_GROWTH`] each try, at which a verified
 /// solve of `request` (without its extra samples) reaches `optimal`;
-/// `None` when none does within [`duration::DURATION_SEARCH_BUDGET`], the
-/// caller's deadline or [`request::MAX_DURATION_S`]. The solve is
+/// `None` when none does within [`infeasible::duration::DURATION_SEARCH_BUDGET`], the
+/// caller's deadline or [`task::MAX_DURATION_S`]. The solve is
 /// deterministic, so the same request at the returned duration answers
 /// `optimal` again.
 fn verified_duration(
@@ -156,13 +155,13 @@ fn verified_duration(
     lower_bound: Option<f64>,
     ctl: &SolveControl,
 ) -> Option<f64> {
-    let budget_end = Instant::now() + duration::DURATION_SEARCH_BUDGET;
+    let budget_end = Instant::now() + infeasible::duration::DURATION_SEARCH_BUDGET;
     let search = SolveControl {
         deadline: Some(ctl.deadline.map_or(budget_end, |d| d.min(budget_end))),
         cancel: ctl.cancel.clone(),
     };
-    let mut duration = lower_bound? * duration::DURATION_SEARCH_GROWTH;
-    while duration <= request::MAX_DURATION_S && !search.should_stop() {
+    let mut duration = lower_bound? * infeasible::duration::DURATION_SEARCH_GROWTH;
+    while duration <= task::MAX_DURATION_S && !search.should_stop() {
         let mut at = request.clone();
         at.duration_s = (duration * 1000.0).ceil() / 1000.0;
         at.samples = 0;
@@ -173,7 +172,7 @@ fn verified_duration(
                 return Some(at.duration_s);
             }
         }
-        duration *= duration::DURATION_SEARCH_GROWTH;
+        duration *= infeasible::duration::DURATION_SEARCH_GROWTH;
     }
     None
 }

@@ -193,7 +193,7 @@ pub struct TrajectoryReport {
     /// Where that distance occurs.
     pub closest: Option<Closest>,
     /// Lower bound (m) on the clearance over the whole continuous motion,
-    /// between the verification samples too ([`super::continuous`]);
+    /// between the verification samples too ([`super::verify::continuous`]);
     /// `None` without obstacles. `optimal` requires it to meet
     /// `clearance_m`.
     pub continuous_clearance_m: Option<f64>,
@@ -348,7 +348,7 @@ pub struct OptimizeResponse {
     /// With status `infeasible` because `duration_s` is too short: a proven
     /// lower bound (s) on any feasible duration, from the velocity,
     /// acceleration and jerk limits and the distance the motion must cover
-    /// ([`super::duration`]); durations above it may still be infeasible.
+    /// ([`super::infeasible::duration`]); durations above it may still be infeasible.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub duration_lower_bound_s: Option<f64>,
 }

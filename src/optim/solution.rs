@@ -1,7 +1,7 @@
 //! What a solve returns and how a caller controls it: [`Solution`],
 //! [`SolveStats`] (the counters benchmarks and the CLI print) and
 //! [`SolveControl`] (deadline and cancel flag). Plain types: the SCP
-//! driver (`scp`, `scp_state`) fills them.
+//! driver (`scp`, `scp::state`) fills them.
 
 use super::qp::{QpFailure, QpSolution};
 use super::report::{Status, TrajectoryReport};
@@ -76,7 +76,7 @@ pub struct SolveStats {
     pub evaluation_ms: f64,
     /// Wall time in dense verification (ms).
     pub verification_ms: f64,
-    /// Restarts from prior draws that ran (see [`restart`](super::restart)).
+    /// Restarts from prior draws that ran (see [`restart`](super::seeds::restart)).
     pub restarts: usize,
 }
 

@@ -10,8 +10,8 @@
 
 use super::limits::LimiterLoad;
 use super::state::AppState;
-use crate::optim::request::{MAX_ITERATIONS, MAX_RESTARTS};
-use crate::optim::restart::RESTART_MAX_ITERATIONS;
+use crate::optim::seeds::restart::RESTART_MAX_ITERATIONS;
+use crate::optim::task::{MAX_ITERATIONS, MAX_RESTARTS};
 use axum::extract::{MatchedPath, Request, State};
 use axum::middleware::Next;
 use axum::response::Response;

@@ -145,7 +145,10 @@ fn a_too_short_duration_is_proven_infeasible_at_once() {
         .starts_with("duration_s:"));
     // The proof is closed-form; the bounded search for a verified duration
     // is what takes time.
-    assert!(t0.elapsed() < dpmp::optim::duration::DURATION_SEARCH_BUDGET + Duration::from_secs(3));
+    assert!(
+        t0.elapsed()
+            < dpmp::optim::infeasible::duration::DURATION_SEARCH_BUDGET + Duration::from_secs(3)
+    );
     if let Some(d) = answer["min_duration_s"].as_f64() {
         assert!(d >= bound);
         v["duration_s"] = json!(d);

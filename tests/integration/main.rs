@@ -22,6 +22,7 @@ mod http_api;
 mod http_contract;
 mod http_plan;
 mod http_robustness;
+mod module_graph;
 mod net_cli;
 mod net_model;
 mod net_train;

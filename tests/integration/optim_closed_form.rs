@@ -3,7 +3,7 @@
 
 use crate::common::requests::typical;
 use dpmp::fixtures::ExampleSettings;
-use dpmp::optim::whiten::Whitening;
+use dpmp::optim::problem::whiten::Whitening;
 use dpmp::optim::{OptimizeRequest, SolveControl, Status};
 use dpmp::promp::{ViaPoint, WeightDistribution};
 use dpmp::robot::Robot;

@@ -7,7 +7,7 @@
 use crate::common::scene::sphere;
 use dpmp::fixtures::{typical_request, ExampleSettings};
 use dpmp::geometry::{OrientedBox, Primitive};
-use dpmp::optim::continuous::displacement_bound;
+use dpmp::optim::verify::continuous::displacement_bound;
 use dpmp::optim::{optimize, OptimizeRequest, PriorSpec, Status};
 use dpmp::promp::{Basis, PrompConfig};
 use dpmp::robot::{Robot, ShapeGeometry};

@@ -4,7 +4,7 @@
 //! active-set methods: near-parallel rows, degenerate vertices, drift in
 //! the factor updates, incompatible hard rows.
 
-use dpmp::optim::dual_active_set::{self as das, Failure, Row, Settings, WarmStart};
+use dpmp::optim::qp::dual_active_set::{self as das, Failure, Row, Settings, WarmStart};
 use dpmp::optim::qp::{Inequality, Qp, QpSettings};
 use nalgebra::DVector;
 use rand::{Rng, SeedableRng};

@@ -13,8 +13,8 @@
 //!   1e-4 rad where dense verification made it solve a larger one).
 
 use dpmp::fixtures::{typical_request, ExampleSettings};
+use dpmp::optim::problem::whiten::Whitening;
 use dpmp::optim::qp::{Inequality, Qp, QpSettings};
-use dpmp::optim::whiten::Whitening;
 use dpmp::optim::{OptimizeRequest, PriorSpec, Problem, SolveControl, Status};
 use dpmp::promp::annotation::JointAnnotation;
 use dpmp::promp::{ViaPoint, WeightDistribution};

@@ -1,4 +1,5 @@
-//! The optimise request (DESIGN.md's JSON contract), its solver knobs and
+//! The optimise request (DESIGN.md's JSON contract): the prior and the task
+//! ([`super::task`]'s goal, boundary and solver knobs), the request's size
 //! limits, and (`validate`) its validation into a [`Problem`](super::Problem).
 
 mod validate;
@@ -6,6 +7,7 @@ mod validate;
 pub use validate::check_prior;
 
 pub use super::report::TrajectoryFormat;
+use super::task::{Boundary, Goal, SolverOptions};
 use crate::promp::annotation::JointAnnotation;
 use crate::promp::PrompConfig;
 use crate::scene::Obstacle;
@@ -17,16 +19,6 @@ pub const MAX_OBSTACLES: usize = 1000;
 pub const MAX_EXTRA_SAMPLES: usize = 100;
 /// Largest accepted `promp.n_samples`.
 pub const MAX_PHASE_SAMPLES: usize = 2000;
-/// Default distance beyond `clearance_m` within which pairs are linearised.
-pub const DEFAULT_ACTIVATION_MARGIN_M: f64 = 0.01;
-/// Largest accepted `options.restarts`.
-pub const MAX_RESTARTS: usize = 32;
-/// Largest accepted `options.max_iterations` (of the run from the prior
-/// mean; each restart adds at most `restart::RESTART_MAX_ITERATIONS`).
-pub const MAX_ITERATIONS: usize = 1000;
-/// Largest accepted `duration_s`.
-pub const MAX_DURATION_S: f64 = 600.0;
-
 /// An optimise request (`POST /v1/optimize`, `dpmp optimize`).
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -84,19 +76,6 @@ pub struct OptimizeRequest {
     pub acceleration_scaling: f64,
 }
 
-/// Velocity and acceleration at the start and the end of the motion.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Boundary {
-    /// Zero velocity and acceleration at both ends: the motion starts from
-    /// and comes to a standstill, as libfranka and ros2_control require of
-    /// a commanded motion.
-    #[default]
-    Rest,
-    /// Whatever velocity and acceleration the weights give.
-    Free,
-}
-
 fn one() -> f64 {
     1.0
 }
@@ -110,10 +89,6 @@ fn default_duration() -> f64 {
 fn default_clearance() -> f64 {
     0.02
 }
-fn default_tolerance() -> f64 {
-    0.01
-}
-
 /// The prior: a full Gaussian or the paper's per-joint annotation.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(untagged)]
@@ -137,119 +112,5 @@ impl From<&crate::promp::WeightDistribution> for PriorSpec {
     fn from(dist: &crate::promp::WeightDistribution) -> Self {
         let crate::promp::distribution::DistributionJson { mean, cov } = dist.into();
         PriorSpec::Full { mean, cov }
-    }
-}
-
-/// Goal: TCP position at the end of the motion and, optionally, the
-/// direction the gripper approaches from.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct Goal {
-    /// Target TCP position in the base frame (m).
-    pub position: [f64; 3],
-    /// Allowed distance (m).
-    #[serde(default = "default_tolerance")]
-    pub tolerance_m: f64,
-    /// Unit vector in the base frame: the gripper's z axis (the direction
-    /// the fingers point) at the end must lie within
-    /// `approach_tolerance_rad` of it.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub approach_axis: Option<[f64; 3]>,
-    /// Allowed angle (rad) between the gripper's z axis and
-    /// `approach_axis`, in (0, π].
-    #[serde(
-        default = "default_approach_tolerance",
-        skip_serializing_if = "is_default_approach_tolerance"
-    )]
-    pub approach_tolerance_rad: f64,
-}
-
-impl Goal {
-    /// A position goal within `tolerance_m`, no approach direction.
-    pub fn at(position: [f64; 3], tolerance_m: f64) -> Goal {
-        Goal {
-            position,
-            tolerance_m,
-            approach_axis: None,
-            approach_tolerance_rad: DEFAULT_APPROACH_TOLERANCE_RAD,
-        }
-    }
-}
-
-/// Default `goal.approach_tolerance_rad`: 10°.
-pub const DEFAULT_APPROACH_TOLERANCE_RAD: f64 = std::f64::consts::PI / 18.0;
-
-fn default_approach_tolerance() -> f64 {
-    DEFAULT_APPROACH_TOLERANCE_RAD
-}
-fn is_default_approach_tolerance(v: &f64) -> bool {
-    *v == DEFAULT_APPROACH_TOLERANCE_RAD
-}
-
-/// Solver knobs; every field is optional in JSON.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields, default)]
-pub struct SolverOptions {
-    /// Whitening regularisation `λ` in `Σ + λI` (default: 1e-6 x the mean
-    /// prior variance).
-    pub lambda: Option<f64>,
-    /// Largest number of SCP iterations (QPs).
-    pub max_iterations: usize,
-    /// Robot-obstacle pairs closer than this (m) are linearised (default:
-    /// `clearance_m + 0.01`); must be >= `clearance_m`.
-    pub activation_distance_m: Option<f64>,
-    /// Dense verification samples per optimisation sample (>= 4).
-    pub verify_factor: usize,
-    /// Seed of the prior draws for `samples` and for `restarts`.
-    pub seed: u64,
-    /// Restarts from seeded prior draws when the run from the prior mean
-    /// ends without a feasible solution (0..=32; 0 disables them).
-    pub restarts: usize,
-    /// Opt-in: also bound every weight by its joint's limits (guarantees
-    /// the limits at every phase, but real priors' weights lie far outside
-    /// the limits, so this usually makes them infeasible).
-    pub bound_weights: bool,
-    /// Initial trust-region half-width on the whitened weights.
-    pub trust_region: f64,
-    /// Initial L1 penalty on constraint slacks.
-    pub penalty: f64,
-    /// Clarabel's tolerances.
-    pub qp_tolerance: f64,
-    /// Optional final configuration as an equality (for conditioning-style
-    /// requests and tests).
-    pub final_configuration: Option<Vec<f64>>,
-    /// Which solver takes the intermediate SCP iterations; the final QP
-    /// of an `optimal` answer is Clarabel's either way.
-    pub inner_solver: InnerSolver,
-}
-
-/// The solver of the intermediate SCP iterations.
-#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize, PartialEq, Eq)]
-#[serde(rename_all = "snake_case")]
-pub enum InnerSolver {
-    /// The warm-started dual active-set method (default; about 100x
-    /// cheaper per QP).
-    #[default]
-    ActiveSet,
-    /// Clarabel for every QP (the reference the benchmark compares with).
-    Clarabel,
-}
-
-impl Default for SolverOptions {
-    fn default() -> Self {
-        SolverOptions {
-            lambda: None,
-            max_iterations: 100,
-            activation_distance_m: None,
-            verify_factor: 4,
-            seed: 0,
-            restarts: 4,
-            bound_weights: false,
-            trust_region: 1.0,
-            penalty: 1e3,
-            qp_tolerance: 1e-8,
-            final_configuration: None,
-            inner_solver: InnerSolver::default(),
-        }
     }
 }

@@ -3,17 +3,16 @@
 //! prior repaired when it is not positive semi-definite (with a warning),
 //! the whitening, the phase rows and the limit set built.
 
-use super::DEFAULT_ACTIVATION_MARGIN_M;
-use super::{Boundary, Goal, OptimizeRequest, PriorSpec, SolverOptions};
-use super::{
-    MAX_DURATION_S, MAX_EXTRA_SAMPLES, MAX_ITERATIONS, MAX_OBSTACLES, MAX_PHASE_SAMPLES,
+use super::{OptimizeRequest, PriorSpec, MAX_EXTRA_SAMPLES, MAX_OBSTACLES, MAX_PHASE_SAMPLES};
+use crate::error::{ensure_finite, ensure_in_range as check_range, ensure_positive};
+use crate::optim::problem::linear::LinearSet;
+use crate::optim::problem::phases::{PhaseRows, TimeWarp};
+use crate::optim::problem::whiten::Whitening;
+use crate::optim::problem::Problem;
+use crate::optim::task::{
+    Boundary, Goal, SolverOptions, DEFAULT_ACTIVATION_MARGIN_M, MAX_DURATION_S, MAX_ITERATIONS,
     MAX_RESTARTS,
 };
-use crate::error::{ensure_finite, ensure_in_range as check_range, ensure_positive};
-use crate::optim::linear::LinearSet;
-use crate::optim::phases::{PhaseRows, TimeWarp};
-use crate::optim::problem::Problem;
-use crate::optim::whiten::Whitening;
 use crate::promp::annotation::{prior_from_joints, REPAIR_FLOOR_RELATIVE};
 use crate::promp::basis::phase_grid;
 use crate::promp::{repair_covariance, Basis, PrompConfig, WeightDistribution};

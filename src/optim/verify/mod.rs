@@ -1,17 +1,19 @@
 //! Dense verification: every constraint evaluated at `verify_factor` times
 //! the optimisation sampling, with real forward kinematics and distances to
 //! the robot's mesh hulls, plus the continuous-motion clearance bound
-//! between the samples ([`super::continuous`]). The report the user sees
+//! between the samples ([`crate::optim::verify::continuous`]). The report the user sees
 //! always comes from here.
 
-use super::linear::RATE_BUFFER;
-use super::phases::Derivative;
-use super::problem::Problem;
-use super::report::{
+pub mod continuous;
+
+use crate::optim::problem::linear::RATE_BUFFER;
+use crate::optim::problem::phases::Derivative;
+use crate::optim::problem::Problem;
+use crate::optim::report::{
     Closest, JointTrajectory, TrajectoryFormat, TrajectoryPoint, TrajectoryReport,
 };
-use super::solution::SolveControl;
-use super::tolerances::FEASIBILITY_TOLERANCE;
+use crate::optim::solution::SolveControl;
+use crate::optim::tolerances::FEASIBILITY_TOLERANCE;
 use crate::scene::Clearance;
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;

@@ -42,9 +42,9 @@
 //! ([`DURATION_SEARCH_GROWTH`]) within [`DURATION_SEARCH_BUDGET`] and the
 //! caller's deadline.
 
-use super::phases::Derivative;
-use super::problem::Problem;
-use super::request::MAX_DURATION_S;
+use crate::optim::problem::phases::Derivative;
+use crate::optim::problem::Problem;
+use crate::optim::task::MAX_DURATION_S;
 use std::time::Duration;
 
 /// Cells of the upper Riemann sum of a joint's speed bound.

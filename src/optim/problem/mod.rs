@@ -1,12 +1,16 @@
 //! [`Problem`]: a validated, whitened request, ready to solve — plain
-//! data, built by [`OptimizeRequest::validate`](super::OptimizeRequest::validate)
+//! data, built by [`OptimizeRequest::validate`](crate::optim::OptimizeRequest::validate)
 //! (`request::validate`), read by the solver and the verifier.
 
-use super::linear::LinearSet;
-use super::phases::PhaseRows;
-use super::request::{Goal, SolverOptions};
-use super::tolerances::FEASIBILITY_TOLERANCE;
-use super::whiten::Whitening;
+pub mod linear;
+pub mod phases;
+pub mod whiten;
+
+use crate::optim::problem::linear::LinearSet;
+use crate::optim::problem::phases::PhaseRows;
+use crate::optim::problem::whiten::Whitening;
+use crate::optim::task::{Goal, SolverOptions};
+use crate::optim::tolerances::FEASIBILITY_TOLERANCE;
 use crate::promp::{Basis, WeightDistribution};
 use crate::robot::Robot;
 use crate::scene::Scene;
@@ -26,7 +30,7 @@ pub struct Problem {
     /// Phases 0 and 1 (start / final equalities, goal).
     pub(crate) ends: PhaseRows,
     /// Dense verification phases and their basis rows, `dense[k]` the
-    /// `k`-th time derivative ([`Derivative::order`](super::phases::Derivative::order)).
+    /// `k`-th time derivative ([`Derivative::order`](crate::optim::problem::phases::Derivative::order)).
     pub(crate) dense_phases: Vec<f64>,
     pub(crate) dense: [DMatrix<f64>; 4],
     pub(crate) linear: LinearSet,
@@ -36,9 +40,9 @@ pub struct Problem {
     pub(crate) options: SolverOptions,
     pub(crate) duration: f64,
     /// How the phase advances with time (rest-to-rest or free ends).
-    pub(crate) warp: super::phases::TimeWarp,
+    pub(crate) warp: crate::optim::problem::phases::TimeWarp,
     /// How answers write the trajectory.
-    pub(crate) trajectory_format: super::report::TrajectoryFormat,
+    pub(crate) trajectory_format: crate::optim::report::TrajectoryFormat,
     pub(crate) n_extra_samples: usize,
     pub(crate) warnings: Vec<String>,
 }
@@ -94,7 +98,7 @@ impl Problem {
 
     /// Whether every constraint in `report` holds to
     /// [`FEASIBILITY_TOLERANCE`].
-    pub fn is_feasible(&self, report: &super::report::TrajectoryReport) -> bool {
+    pub fn is_feasible(&self, report: &crate::optim::report::TrajectoryReport) -> bool {
         let tol = FEASIBILITY_TOLERANCE;
         let clear_ok = report
             .min_clearance_m

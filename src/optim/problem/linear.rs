@@ -10,8 +10,8 @@
 //! a trust region the rows near the bound are sent and the rest are checked
 //! afterwards ([`LinearSet::violated`]) and added if needed.
 
-use super::phases::{Derivative, PhaseRows};
-use super::qp::Inequality;
+use crate::optim::problem::phases::{Derivative, PhaseRows};
+use crate::optim::qp::Inequality;
 use nalgebra::DVector;
 
 /// Row screening margin (rad or rad/s) when there is no trust region.
@@ -267,7 +267,7 @@ impl LinearSet {
 
     /// Equalities `a·z = b` for the start and final configuration at
     /// `ends` (phases 0 and 1). Rest needs no row: the resting timing
-    /// ([`TimeWarp`](super::phases::TimeWarp)) makes every trajectory rest
+    /// ([`TimeWarp`](crate::optim::problem::phases::TimeWarp)) makes every trajectory rest
     /// at the ends; [`LinearSet::equality_error`] still checks it.
     pub fn equalities(&self, ends: &PhaseRows, mean: &DVector<f64>) -> Vec<(DVector<f64>, f64)> {
         let mut out = Vec::new();
@@ -352,7 +352,7 @@ fn reach(rows: &PhaseRows, r: RowRef, radius: Option<f64>) -> f64 {
 mod tests {
     use super::*;
     use crate::fixtures::example_distribution;
-    use crate::optim::whiten::Whitening;
+    use crate::optim::problem::whiten::Whitening;
     use crate::promp::{Basis, PrompConfig};
 
     #[test]
@@ -364,7 +364,7 @@ mod tests {
         .unwrap();
         let dist = example_distribution(&basis, 20, 2).unwrap();
         let wh = Whitening::new(&dist, Whitening::default_lambda(&dist)).unwrap();
-        let timing = (4.0, crate::optim::phases::TimeWarp::MinimumJerk);
+        let timing = (4.0, crate::optim::problem::phases::TimeWarp::MinimumJerk);
         let rows = PhaseRows::new(&basis, &wh, 7, timing, basis.phases());
         let set = LinearSet {
             lower: vec![-2.0; 7],

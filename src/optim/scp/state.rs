@@ -18,7 +18,7 @@
 //!    generation, then raises the penalty, then gives up.
 //!
 //! **Certification.** Intermediate QPs are solved by the warm-startable
-//! [dual active-set method](super::dual_active_set); the weights returned as
+//! [dual active-set method](crate::optim::qp::dual_active_set); the weights returned as
 //! `optimal` always come from a QP solved by Clarabel (the solver of
 //! record) at the converged point: exact goal cone, exact constraint
 //! generation, the trust ball reset to at least its initial radius. When
@@ -28,17 +28,17 @@
 //! the loop goes on (back to the active-set method if the step was not
 //! tiny). Clarabel's status and residuals go into the report's `final_qp`.
 
-use super::evaluate::GridEval;
-use super::phases::PhaseRows;
-use super::problem::Problem;
-use super::qp::{ClarabelInfo, QpFailure, QpSolution};
-use super::report::{FinalQp, Status};
-use super::solution::{timed, Solution, SolveControl, SolveStats};
-use super::subproblem::{ActiveRows, Linearisation};
-use super::tolerances::{
+use crate::optim::problem::phases::PhaseRows;
+use crate::optim::problem::Problem;
+use crate::optim::qp::{ClarabelInfo, QpFailure, QpSolution};
+use crate::optim::report::{FinalQp, Status};
+use crate::optim::scp::evaluate::GridEval;
+use crate::optim::scp::subproblem::{ActiveRows, Linearisation};
+use crate::optim::solution::{timed, Solution, SolveControl, SolveStats};
+use crate::optim::tolerances::{
     BALL_ACTIVE_FRACTION, MAX_PENALTY, MAX_TRUST_REGION, MIN_TRUST_REGION, OPTIMALITY_TOLERANCE,
 };
-use super::verify::Verification;
+use crate::optim::verify::Verification;
 use crate::Result;
 use nalgebra::DVector;
 use std::time::Instant;
@@ -51,7 +51,7 @@ struct Step {
 }
 
 /// The state of one SCP run (see the module docs).
-pub(super) struct Scp<'a> {
+pub(in crate::optim) struct Scp<'a> {
     problem: &'a Problem,
     centre: &'a DVector<f64>,
     ctl: &'a SolveControl,
@@ -81,7 +81,7 @@ pub(super) struct Scp<'a> {
 type Flow = Option<Solution>;
 
 impl<'a> Scp<'a> {
-    pub(super) fn new(
+    pub(in crate::optim) fn new(
         problem: &'a Problem,
         start: &DVector<f64>,
         centre: &'a DVector<f64>,
@@ -118,7 +118,7 @@ impl<'a> Scp<'a> {
     }
 
     /// Iterate until a step returns the answer.
-    pub(super) fn run(mut self) -> Result<Solution> {
+    pub(in crate::optim) fn run(mut self) -> Result<Solution> {
         loop {
             if let Some(done) = self.finish_or_certify() {
                 return Ok(done);
@@ -205,7 +205,7 @@ impl<'a> Scp<'a> {
         let at = Linearisation {
             exact: self.exact || self.certify,
             certify: self.certify
-                || self.problem.options.inner_solver == super::request::InnerSolver::Clarabel,
+                || self.problem.options.inner_solver == crate::optim::task::InnerSolver::Clarabel,
             rows: &self.rows,
             eval: &self.eval,
             centre: self.centre,
@@ -399,7 +399,7 @@ impl<'a> Scp<'a> {
     fn answer(
         &mut self,
         status: Status,
-        verification: Option<super::verify::Verification>,
+        verification: Option<crate::optim::verify::Verification>,
         reason: Option<String>,
         extra_warnings: &[String],
     ) -> Solution {

@@ -1,8 +1,8 @@
 //! Infeasibility diagnosis before solving: conditions that no trajectory
 //! can meet, each reported with the constraint it breaks.
 
-use super::problem::Problem;
-use super::tolerances::FEASIBILITY_TOLERANCE;
+use crate::optim::problem::Problem;
+use crate::optim::tolerances::FEASIBILITY_TOLERANCE;
 use crate::robot::{IkOptions, IkTarget};
 use nalgebra::{Point3, Vector3};
 

@@ -20,7 +20,7 @@
 //! The optimisation set starts as the request's `n_samples` grid and grows
 //! by the phases that dense verification flags.
 
-use super::whiten::Whitening;
+use crate::optim::problem::whiten::Whitening;
 use crate::promp::Basis;
 use nalgebra::{DMatrix, DVector};
 

@@ -28,8 +28,8 @@
 //! [`MAX_BISECTIONS`] times. An interval that still falls short is reported
 //! by its midpoint phase, which the optimiser adds to its grid.
 
-use super::problem::Problem;
-use super::tolerances::FEASIBILITY_TOLERANCE;
+use crate::optim::problem::Problem;
+use crate::optim::tolerances::FEASIBILITY_TOLERANCE;
 use nalgebra::DMatrix;
 
 /// Bisections of one verification interval before it is flagged.
@@ -86,7 +86,7 @@ impl Problem {
         q: &DMatrix<f64>,
         qd: &DMatrix<f64>,
         clearance: &[Option<f64>],
-        ctl: &super::solution::SolveControl,
+        ctl: &crate::optim::solution::SolveControl,
     ) -> Option<Certificate> {
         let sample = |p: usize| Sample {
             z: self.dense_phases[p],

@@ -2,11 +2,11 @@
 //! kinematics, every clearance pair within the activation distance (parry),
 //! the goal residual, the limit rows, and the merit the step test uses.
 
-use super::phases::PhaseRows;
-use super::problem::Problem;
-use super::solution::SolveControl;
-use super::tolerances::{buffered_angle, buffered_tolerance};
-use super::tolerances::{CLEARANCE_BUFFER_M, FEASIBILITY_TOLERANCE, LINEAR_TOLERANCE};
+use crate::optim::problem::phases::PhaseRows;
+use crate::optim::problem::Problem;
+use crate::optim::solution::SolveControl;
+use crate::optim::tolerances::{buffered_angle, buffered_tolerance};
+use crate::optim::tolerances::{CLEARANCE_BUFFER_M, FEASIBILITY_TOLERANCE, LINEAR_TOLERANCE};
 use crate::robot::Frames;
 use crate::scene::Clearance;
 use nalgebra::{DVector, UnitQuaternion, Vector3};
@@ -14,69 +14,69 @@ use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Constraint values at one iterate on the optimisation phases.
-pub(super) struct GridEval {
-    pub(super) z: DVector<f64>,
-    pub(super) w: DVector<f64>,
-    pub(super) cost: f64,
+pub(in crate::optim) struct GridEval {
+    pub(in crate::optim) z: DVector<f64>,
+    pub(in crate::optim) w: DVector<f64>,
+    pub(in crate::optim) cost: f64,
     /// Pairs within the activation distance, per phase that has any.
-    pub(super) pairs: Vec<PhasePairs>,
+    pub(in crate::optim) pairs: Vec<PhasePairs>,
     /// Σ max(0, clearance_m + buffer - d).
-    pub(super) buffered_violation: f64,
+    pub(in crate::optim) buffered_violation: f64,
     /// Σ max(0, clearance_m - d) + goal excess: what must reach zero.
-    pub(super) true_violation: f64,
-    pub(super) goal: Option<GoalEval>,
-    pub(super) linear_ok: bool,
+    pub(in crate::optim) true_violation: f64,
+    pub(in crate::optim) goal: Option<GoalEval>,
+    pub(in crate::optim) linear_ok: bool,
     /// The caller's deadline or cancel flag stopped the clearance pass:
     /// the pairs are incomplete, so the iterate is never accepted.
-    pub(super) interrupted: bool,
+    pub(in crate::optim) interrupted: bool,
 }
 
-pub(super) struct PhasePairs {
-    pub(super) phase: usize,
-    pub(super) phase_value: f64,
-    pub(super) q: Vec<f64>,
-    pub(super) frames: Frames,
-    pub(super) list: Vec<Clearance>,
+pub(in crate::optim) struct PhasePairs {
+    pub(in crate::optim) phase: usize,
+    pub(in crate::optim) phase_value: f64,
+    pub(in crate::optim) q: Vec<f64>,
+    pub(in crate::optim) frames: Frames,
+    pub(in crate::optim) list: Vec<Clearance>,
 }
 
-pub(super) struct GoalEval {
-    pub(super) q: Vec<f64>,
-    pub(super) residual: Vector3<f64>,
+pub(in crate::optim) struct GoalEval {
+    pub(in crate::optim) q: Vec<f64>,
+    pub(in crate::optim) residual: Vector3<f64>,
     /// Distance beyond `tolerance_m` (what must reach zero).
-    pub(super) excess: f64,
+    pub(in crate::optim) excess: f64,
     /// Distance beyond the buffered tolerance the QP aims for (the merit's).
-    pub(super) buffered_excess: f64,
+    pub(in crate::optim) buffered_excess: f64,
     /// The approach direction, when the goal has one.
-    pub(super) approach: Option<ApproachEval>,
+    pub(in crate::optim) approach: Option<ApproachEval>,
 }
 
 /// The approach constraint `a(q)·u >= cos(tolerance)` at the final
 /// configuration, `a` the gripper's z axis and `u` the goal's axis.
-pub(super) struct ApproachEval {
+pub(in crate::optim) struct ApproachEval {
     /// `a(q)·u`.
-    pub(super) cosine: f64,
+    pub(in crate::optim) cosine: f64,
     /// `∂(a·u)/∂q`: `(ω_j × a)·u` for each joint's angular Jacobian column.
-    pub(super) gradient: Vec<f64>,
+    pub(in crate::optim) gradient: Vec<f64>,
     /// `cos(tolerance) - a·u` when positive (what must reach zero).
-    pub(super) excess: f64,
+    pub(in crate::optim) excess: f64,
     /// The same against the buffered tolerance the QP aims for.
-    pub(super) buffered_excess: f64,
+    pub(in crate::optim) buffered_excess: f64,
     /// The cosine the QP aims for.
-    pub(super) target: f64,
+    pub(in crate::optim) target: f64,
 }
 
 impl GridEval {
-    pub(super) fn merit(&self, rho: f64) -> f64 {
+    pub(in crate::optim) fn merit(&self, rho: f64) -> f64 {
         self.cost + rho * (self.buffered_violation + self.goal_excess())
     }
 
-    pub(super) fn goal_excess(&self) -> f64 {
+    pub(in crate::optim) fn goal_excess(&self) -> f64 {
         self.goal.as_ref().map_or(0.0, |g| {
             g.buffered_excess + g.approach.as_ref().map_or(0.0, |a| a.buffered_excess)
         })
     }
 
-    pub(super) fn feasible(&self) -> bool {
+    pub(in crate::optim) fn feasible(&self) -> bool {
         !self.interrupted && self.linear_ok && self.true_violation <= FEASIBILITY_TOLERANCE
     }
 }
@@ -85,7 +85,7 @@ impl Problem {
     /// Evaluate constraints at `z` on the optimisation phases; a stop by
     /// `ctl` skips the phases not yet evaluated and marks the result
     /// [`GridEval::interrupted`].
-    pub(super) fn evaluate_grid(
+    pub(in crate::optim) fn evaluate_grid(
         &self,
         rows: &PhaseRows,
         z: DVector<f64>,
@@ -191,7 +191,7 @@ impl Problem {
     }
 
     /// The most violated non-linear constraint at `eval`, in words.
-    pub(super) fn worst_constraint(&self, eval: &GridEval) -> String {
+    pub(in crate::optim) fn worst_constraint(&self, eval: &GridEval) -> String {
         let mut worst: Option<(f64, String)> = None;
         for pp in &eval.pairs {
             for c in &pp.list {

@@ -1,20 +1,20 @@
 //! One SCP subproblem: the clearance pairs and the goal linearised at the
-//! iterate, assembled into a [`Qp`] over a [working set](super::working_set)
+//! iterate, assembled into a [`Qp`] over a [working set](crate::optim::scp::working_set)
 //! of rows and solved by constraint generation.
 
-use super::dual_active_set::WarmStart;
-use super::evaluate::GridEval;
-use super::linear::{RowKind, RowRef};
-use super::phases::PhaseRows;
-use super::problem::Problem;
-use super::qp::{Cone, Inequality, Qp, QpFailure, QpSettings, QpSolution};
-use super::solution::{SolveControl, SolveStats};
-use super::tolerances::buffered_tolerance;
-use super::tolerances::{
+use crate::optim::problem::linear::{RowKind, RowRef};
+use crate::optim::problem::phases::PhaseRows;
+use crate::optim::problem::Problem;
+use crate::optim::qp::dual_active_set::WarmStart;
+use crate::optim::qp::{Cone, Inequality, Qp, QpFailure, QpSettings, QpSolution};
+use crate::optim::scp::evaluate::GridEval;
+use crate::optim::scp::working_set::{thin_in_time, Candidate};
+use crate::optim::solution::{SolveControl, SolveStats};
+use crate::optim::tolerances::buffered_tolerance;
+use crate::optim::tolerances::{
     ACTIVE_DUAL_FRACTION, CERTIFY_TIGHTENING, CLEARANCE_BAND_M, CLEARANCE_BUFFER_M,
     GENERATION_TOLERANCE,
 };
-use super::working_set::{thin_in_time, Candidate};
 use nalgebra::{DMatrix, DVector};
 use std::collections::HashSet;
 
@@ -27,11 +27,11 @@ const WORKING_SET_ROUNDS: usize = 1;
 
 impl Problem {
     /// Build and solve the QP at `eval` by constraint generation over the
-    /// [`working_set`](super::working_set); returns the solution (optimal
+    /// [`working_set`](crate::optim::scp::working_set); returns the solution (optimal
     /// for the full linearised QP, or for the working set's model after
     /// [`WORKING_SET_ROUNDS`] unless `at.exact`), the model's value at the
     /// current iterate, and the rows active at the solution.
-    pub(super) fn subproblem(
+    pub(in crate::optim) fn subproblem(
         &self,
         at: &Linearisation,
         hint: &ActiveRows,
@@ -423,7 +423,7 @@ enum RowId {
 /// Rows active at a QP solution (positive multiplier): the start
 /// of the next QP's working set.
 #[derive(Clone, Debug, Default)]
-pub(super) struct ActiveRows {
+pub(in crate::optim) struct ActiveRows {
     linear: Vec<RowRef>,
     /// (phase index, robot shape, obstacle).
     clearance: HashSet<(usize, usize, usize)>,
@@ -434,21 +434,21 @@ pub(super) struct ActiveRows {
 
 /// Where a subproblem is linearised.
 #[derive(Clone, Copy)]
-pub(super) struct Linearisation<'a> {
+pub(in crate::optim) struct Linearisation<'a> {
     /// Generate clearance rows until none is violated (else
     /// [`WORKING_SET_ROUNDS`] rounds).
-    pub(super) exact: bool,
+    pub(in crate::optim) exact: bool,
     /// Solve with Clarabel (the final, certifying QP) instead of the dual
     /// active-set method.
-    pub(super) certify: bool,
-    pub(super) rows: &'a PhaseRows,
-    pub(super) eval: &'a GridEval,
-    pub(super) centre: &'a DVector<f64>,
-    pub(super) rho: f64,
-    pub(super) trust: Option<f64>,
+    pub(in crate::optim) certify: bool,
+    pub(in crate::optim) rows: &'a PhaseRows,
+    pub(in crate::optim) eval: &'a GridEval,
+    pub(in crate::optim) centre: &'a DVector<f64>,
+    pub(in crate::optim) rho: f64,
+    pub(in crate::optim) trust: Option<f64>,
     /// The trust ball's multiplier of the previous active-set QP: where
     /// this one's search starts.
-    pub(super) proximal_hint: f64,
+    pub(in crate::optim) proximal_hint: f64,
 }
 
 #[cfg(test)]

@@ -2,9 +2,9 @@
 //! projected onto the feasible set by the same solver (Mahalanobis-closest
 //! feasible weights to the draw); the feasible projections are returned.
 
-use super::problem::Problem;
-use super::report::{SampleResult, Status};
-use super::solution::SolveControl;
+use crate::optim::problem::Problem;
+use crate::optim::report::{SampleResult, Status};
+use crate::optim::solution::SolveControl;
 use crate::Result;
 use nalgebra::DVector;
 use rand::SeedableRng;

@@ -9,7 +9,7 @@
 //! ```
 //!
 //! which is the SCP subproblem in whitened coordinates after the equalities
-//! are eliminated ([`NullSpace`](super::nullspace::NullSpace)): the Hessian
+//! are eliminated ([`NullSpace`](crate::optim::qp::nullspace::NullSpace)): the Hessian
 //! is the identity, and an L1-penalised soft row is a row whose multiplier
 //! is bounded above by its penalty `u_i` (the dual of `max(0, ·)`). So the
 //! L1 model stays exact with no slack variables.

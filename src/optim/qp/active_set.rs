@@ -1,4 +1,4 @@
-//! A [`Qp`] solved by the [dual active-set method](super::dual_active_set)
+//! A [`Qp`] solved by the [dual active-set method](crate::optim::qp::dual_active_set)
 //! instead of Clarabel: the SCP's intermediate iterations.
 //!
 //! The active-set solver takes an identity Hessian and linear rows only, so
@@ -22,10 +22,10 @@
 //! The final QP of a solve is always Clarabel's (see `scp`): this path only
 //! has to produce good steps.
 
-use super::dual_active_set::{self as das, Row};
-use super::nullspace::NullSpace;
-use super::qp::{Cone, Qp, QpFailure, QpSolution};
-use super::tolerances::{CONE_TOLERANCE, TRUST_FILL, TRUST_OVERSHOOT};
+use crate::optim::qp::dual_active_set::{self as das, Row};
+use crate::optim::qp::nullspace::NullSpace;
+use crate::optim::qp::{Cone, Qp, QpFailure, QpSolution};
+use crate::optim::tolerances::{CONE_TOLERANCE, TRUST_FILL, TRUST_OVERSHOOT};
 use nalgebra::DVector;
 
 /// Tangent cuts per cone at most.

@@ -5,7 +5,7 @@
 //! distance (at every optimisation phase) and the goal at the current
 //! iterate, and solves one QP with Clarabel: hard limit rows, L1-slacked
 //! clearance rows and goal cone, and a trust-region ball `|z - z_k| ≤ Δ`.
-//! The QP is solved on a small [`working_set`](super::working_set): the
+//! The QP is solved on a small [`working_set`](crate::optim::scp::working_set): the
 //! rows active in the previous QP, thinned limit rows a step can reach, and
 //! thinned clearance rows near the target. Limit rows the solution breaks
 //! are always generated until none is left; clearance rows get
@@ -27,16 +27,21 @@
 //! incompatible). A converged feasible iterate is verified densely; flagged
 //! phases join the optimisation set and the loop goes on.
 
-use super::problem::Problem;
-use super::scp_state::Scp;
-pub use super::solution::{Solution, SolveControl, SolveStats};
+mod evaluate;
+mod state;
+mod subproblem;
+pub mod working_set;
+
+use crate::optim::problem::Problem;
+use crate::optim::scp::state::Scp;
+pub use crate::optim::solution::{Solution, SolveControl, SolveStats};
 use crate::Result;
 use nalgebra::DVector;
 
 impl Problem {
     /// SCP towards the prior mean (the Mahalanobis-closest feasible weights).
     /// When that run ends without a feasible answer, it is restarted from
-    /// seeded prior draws (see [`restart`](super::restart)).
+    /// seeded prior draws (see [`restart`](crate::optim::seeds::restart)).
     pub fn solve(&self, ctl: &SolveControl) -> Result<Solution> {
         let zero = DVector::zeros(self.whitening.dim());
         let first = self.run(&zero, &zero, self.options.max_iterations, ctl)?;
@@ -53,7 +58,7 @@ impl Problem {
 
     /// One SCP run from `start` towards `centre`, of at most
     /// `max_iterations` QP iterations.
-    pub(super) fn run(
+    pub(in crate::optim) fn run(
         &self,
         start: &DVector<f64>,
         centre: &DVector<f64>,

@@ -12,7 +12,11 @@
 //! ball isotropic and makes every dense row shorter. The constraint matrix
 //! is built column by column straight into Clarabel's CSC format.
 
-use super::nullspace::NullSpace;
+pub mod active_set;
+pub mod dual_active_set;
+pub mod nullspace;
+
+use crate::optim::qp::nullspace::NullSpace;
 use crate::Error;
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
@@ -104,7 +108,7 @@ pub struct QpSolution {
     pub clarabel: Option<ClarabelInfo>,
     /// The active-set path's row states by inequality index: the warm
     /// start of the next solve over the same rows (plus new ones).
-    pub row_states: Option<super::dual_active_set::WarmStart>,
+    pub row_states: Option<crate::optim::qp::dual_active_set::WarmStart>,
     /// The trust ball's multiplier `μ` in the active-set path (0 when the
     /// ball does not bind, and for Clarabel).
     pub proximal_weight: f64,
@@ -197,7 +201,7 @@ impl Qp {
         }
     }
 
-    pub(super) fn dim(&self) -> usize {
+    pub(in crate::optim) fn dim(&self) -> usize {
         self.center.len()
     }
 
@@ -219,7 +223,7 @@ impl Qp {
 
     /// This problem over `z = z_p + N y` (variables `y`), without its
     /// equalities.
-    pub(super) fn restricted_to(&self, space: &NullSpace) -> Qp {
+    pub(in crate::optim) fn restricted_to(&self, space: &NullSpace) -> Qp {
         let inequalities = self
             .inequalities
             .iter()

@@ -24,16 +24,16 @@
 //! had already verified `optimal`, if any (the best verified trajectory
 //! found within the budget), else with the first run's iterate.
 
-use super::problem::Problem;
-use super::report::Status;
-use super::solution::{Solution, SolveControl, SolveStats};
+use crate::optim::problem::Problem;
+use crate::optim::report::Status;
+use crate::optim::solution::{Solution, SolveControl, SolveStats};
 use crate::Result;
 use nalgebra::DVector;
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 
-pub use super::request::MAX_RESTARTS;
+pub use crate::optim::task::MAX_RESTARTS;
 /// Iteration limit of one restart (less when `options.max_iterations` is).
 pub const RESTART_MAX_ITERATIONS: usize = 40;
 /// Mixed into `options.seed` so that the restart draws are not the
@@ -50,7 +50,11 @@ impl Problem {
     /// on which finishes first: every draw is fixed up front by the seed,
     /// every restart runs to its own end, and the pick is the lowest cost
     /// among the `optimal` runs, ties to the lower restart index.
-    pub(super) fn restart_if_stuck(&self, first: Solution, ctl: &SolveControl) -> Result<Solution> {
+    pub(in crate::optim) fn restart_if_stuck(
+        &self,
+        first: Solution,
+        ctl: &SolveControl,
+    ) -> Result<Solution> {
         let restarts = self.options.restarts;
         if first.status != Status::MaxIterations || restarts == 0 || ctl.stop_reason().is_some() {
             return Ok(first);
@@ -141,7 +145,7 @@ impl Spent {
 mod tests {
     use super::*;
     use crate::fixtures::{typical_request, ExampleSettings};
-    use crate::optim::nullspace::NullSpace;
+    use crate::optim::qp::nullspace::NullSpace;
     use crate::robot::Robot;
 
     /// A run that starts at a feasible point other than the prior mean
