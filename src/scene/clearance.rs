@@ -9,7 +9,8 @@
 //! activation distance) never reach parry.
 
 use super::broadphase::{Bounds, Core};
-use super::distance::{pair_contact, PairContact};
+use super::contact::PairContact;
+use super::distance::pair_contact;
 use super::shape::{CompiledObstacle, RobotPart};
 use super::Scene;
 use crate::robot::{Frames, Robot, ShapeGeometry};

@@ -3,24 +3,12 @@
 //! apart, EPA when penetrating).
 
 use super::clip::{near_piece, Cut};
+use super::contact::PairContact;
 use super::round_contact::round_contact;
 use super::shape::{from_glam, parry_pose_relative, to_glam, LocalShape, Part, RobotPart};
 use crate::robot::hull::ConvexHull;
 use nalgebra::{Isometry3, Point3, Vector3};
 use parry3d::query::ClosestPoints;
-
-/// Signed distance and witness points of one robot/obstacle pair.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PairContact {
-    /// Signed distance (m), negative when penetrating.
-    pub distance: f64,
-    /// Witness point on the robot primitive (base frame).
-    pub point_robot: Vector3<f64>,
-    /// Witness point on the obstacle (base frame).
-    pub point_obstacle: Vector3<f64>,
-    /// Unit normal from the obstacle towards the robot.
-    pub normal: Vector3<f64>,
-}
 
 /// Signed distance between `robot` and `part` when below `prediction` (m);
 /// `None` when they are further apart. A long part is first cut to the

@@ -4,7 +4,9 @@
 //! - [`obstacle`]: the serde types of the request schema and validation;
 //! - [`shape`]: obstacles and robot primitives as parry3d shapes;
 //! - [`broadphase`]: axis-aligned bounds and their gaps;
-//! - [`distance`]: one pair's signed distance, witness points and normal;
+//! - [`contact`]: [`contact::PairContact`], one pair's answer;
+//! - [`distance`]: one pair's signed distance, witness points and normal
+//!   ([`round_contact`]: the closed forms for round shapes);
 //! - [`clearance`]: minimum clearance, pairs within an activation distance,
 //!   and the clearance gradient with respect to the joint angles;
 //! - [`compiled`]: the [`Scene`] itself.
@@ -13,6 +15,7 @@ pub mod broadphase;
 pub mod clearance;
 pub mod clip;
 pub mod compiled;
+pub mod contact;
 pub mod distance;
 pub mod obstacle;
 pub mod round_contact;

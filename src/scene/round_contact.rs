@@ -17,7 +17,7 @@
 //! `tests/integration/robot_collision_mesh.rs`.
 
 use super::broadphase::Core;
-use super::distance::PairContact;
+use super::contact::PairContact;
 use super::shape::{from_glam, LocalShape};
 use crate::geometry::segment::closest_segments;
 use nalgebra::{Isometry3, Point3, Vector3};

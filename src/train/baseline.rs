@@ -13,7 +13,7 @@
 //! predicted mean against the final TCP of the demonstrations' mean.
 
 use super::data::Sample;
-use super::eval::final_marginal;
+use super::final_point::{final_marginal, TcpFk};
 use crate::promp::{Basis, WeightDistribution};
 use crate::{Error, Result};
 use serde::Serialize;
@@ -83,7 +83,7 @@ pub fn evaluate_baseline(
     train: &[Sample],
     eval: &[Sample],
     basis: &Basis,
-    fk: super::eval::TcpFk,
+    fk: TcpFk,
 ) -> Result<BaselineEval> {
     let with_depth = train
         .iter()

@@ -18,18 +18,17 @@
 
 use super::data::{target_tensors, Sample};
 use super::embedding::{davies_bouldin, embed, plot_embedding, Embedding};
+use super::final_point::TcpFk;
+use super::final_point::{final_marginal, quaternion_distance};
 use super::losses::TrajectoryOperator;
 use crate::net::checkpoint::write_atomic;
 use crate::net::predict::predictions_from_outputs;
 use crate::net::{candle_error, Model};
 use crate::promp::{Basis, WeightDistribution};
 use crate::{Error, Result};
-use nalgebra::{Isometry3, UnitQuaternion, Vector3};
+use nalgebra::Vector3;
 use serde::Serialize;
 use std::path::Path;
-
-/// Forward kinematics of the TCP: joint positions to base-frame pose.
-pub type TcpFk<'a> = &'a (dyn Fn(&[f64]) -> Isometry3<f64> + Sync);
 
 /// Table I row: Eq. 7 terms of one joint.
 #[derive(Clone, Debug, Serialize)]
@@ -268,24 +267,6 @@ fn final_point_errors(
         fk(&t_mean).translation.vector,
     );
     (errors, positions)
-}
-
-/// Per-joint mean and standard deviation at the final phase sample.
-pub fn final_marginal(distribution: &WeightDistribution, basis: &Basis) -> (Vec<f64>, Vec<f64>) {
-    let phi = basis.matrix().row(basis.n_samples() - 1).transpose();
-    (0..distribution.n_joints)
-        .map(|j| {
-            let (mean, cov) = distribution.joint_block(j);
-            let var = (phi.transpose() * &cov * &phi)[(0, 0)];
-            (phi.dot(&mean), var.max(0.0).sqrt())
-        })
-        .unzip()
-}
-
-/// Eq. 9: `min(|q - q'|, |q + q'|)` over quaternion coordinates.
-pub fn quaternion_distance(a: &UnitQuaternion<f64>, b: &UnitQuaternion<f64>) -> f64 {
-    let (a, b) = (a.coords, b.coords);
-    (a - b).norm().min((a + b).norm())
 }
 
 fn average(errors: impl Iterator<Item = FinalPointError>) -> FinalPointError {

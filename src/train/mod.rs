@@ -9,6 +9,7 @@ pub mod baseline;
 pub mod data;
 pub mod embedding;
 pub mod eval;
+pub mod final_point;
 pub mod log;
 pub mod losses;
 pub mod norm;

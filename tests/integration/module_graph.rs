@@ -24,12 +24,10 @@ const KNOWN_CYCLES: &[(&str, &[&str])] = &[
         &["hard_set", "make_problems", "problem_file", "runner"],
     ),
     ("scene", &["clip", "shape"]),
-    ("scene", &["distance", "round_contact"]),
     (
         "service",
         &["auth", "config", "metrics", "routes", "server", "state"],
     ),
-    ("train", &["baseline", "eval"]),
 ];
 
 /// Files over [`MAX_LINES`], listed until they are split.
