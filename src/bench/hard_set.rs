@@ -29,7 +29,7 @@
 //! witness against the file as written.
 
 use super::make_problems::{mean_path, round_significant, round_value, MeanPath};
-use super::problem_file::{Expect, Meta, ProblemFile};
+use super::problem_file::{Expect, Meta, ProblemFile, HARD_CATEGORY};
 use super::synth_target::draw_target;
 use crate::fixtures::{typical_request, ExampleSettings};
 use crate::geometry::random_unit;
@@ -47,8 +47,6 @@ use serde_json::{json, Value};
 
 /// Generator name written into every file's `meta.generator`.
 pub const HARD_GENERATOR: &str = "dpmp bench make-problems --set hard v1";
-/// Category of every hard problem.
-pub const HARD_CATEGORY: &str = "hard";
 /// Required clearance of every hard problem (m).
 pub const HARD_CLEARANCE_M: f64 = 0.015;
 /// Goal tolerance (m).

@@ -9,7 +9,6 @@
 //! into [`crate::optim::OptimizeRequest`] by the runner, which reports a
 //! malformed request as a failed problem instead of aborting.
 
-use super::hard_set::HARD_CATEGORY;
 use crate::{Error, Result};
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
@@ -60,6 +59,10 @@ pub const CATEGORIES: [&str; 7] = [
     "degenerate-prior",
     "infeasible",
 ];
+
+/// Category of every problem of the hard set (`dpmp bench make-problems
+/// --set hard`, [`super::hard_set`]).
+pub const HARD_CATEGORY: &str = "hard";
 
 /// One benchmark problem.
 #[derive(Clone, Debug, PartialEq)]

@@ -2,8 +2,8 @@
 //! summaries, written as `report.json` (everything, including every record)
 //! and `report.md` (the tables BENCHMARKS.md quotes).
 
-use super::hard_set::HARD_CATEGORY;
 use super::model_suite::MODEL_CATEGORY;
+use super::problem_file::HARD_CATEGORY;
 use super::problem_file::{write_atomic, CATEGORIES};
 use super::runner::RunRecord;
 use crate::{Error, Result};

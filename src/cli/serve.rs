@@ -12,7 +12,7 @@
 //! The token may also come from `DPMP_API_TOKEN`; it is never logged.
 
 use crate::net::Model;
-use crate::service::auth::{Token, TOKEN_ENV};
+use crate::service::token::{Token, TOKEN_ENV};
 use crate::service::{AppState, ServiceConfig};
 use crate::{Error, Result};
 use std::net::SocketAddr;

@@ -13,30 +13,14 @@
 //! exactly when `K` does. `K'` is short, so parry measures it to `f32`
 //! precision of small coordinates.
 //!
-//! Capsules, cylinders and boxes longer than [`LONG_PART_M`] carry their
+//! Capsules, cylinders and boxes longer than [`LONG_PART_M`](super::shape::LONG_PART_M) carry their
 //! exact `f64` description ([`LongPart`]) for this; the cut is built per
 //! query, only for them.
 
-use super::shape::{to_glam, y_onto, Part};
+use super::shape::{to_glam, y_onto, LongPart, Part};
 use crate::geometry::OrientedBox;
 use nalgebra::{Isometry3, Translation3, Vector3};
 use parry3d::shape::{Capsule, Cuboid, Cylinder, SharedShape};
-
-/// Parts longer than this (m; a box: any full extent) are cut per query.
-pub const LONG_PART_M: f64 = 1.0;
-
-/// The exact description of a long part.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum LongPart {
-    /// The part's core segment with its radius: a capsule (round ends) or a
-    /// cylinder (flat ends).
-    Segment {
-        /// Flat end faces (a cylinder).
-        flat_ends: bool,
-    },
-    /// An oriented box.
-    Box(OrientedBox),
-}
 
 /// What is left of a part near a robot shape.
 pub enum Cut {

@@ -5,14 +5,29 @@
 //! [`super::distance`]), so parts keep their poses in `f64` here.
 
 use super::broadphase::{Bounds, Core};
-use super::clip::{LongPart, LONG_PART_M};
 use super::obstacle::{BerryShape, ObstacleShape};
-use crate::geometry::{quaternion, Capsule, Primitive, Sphere};
+use crate::geometry::{quaternion, Capsule, OrientedBox, Primitive, Sphere};
 use crate::robot::hull::ConvexHull;
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use parry3d::shape::{
     Ball, Capsule as ParryCapsule, ConvexPolyhedron, Cuboid, Cylinder, SharedShape,
 };
+
+/// Parts longer than this (m; a box: any full extent) are cut per query.
+pub const LONG_PART_M: f64 = 1.0;
+
+/// The exact description of a long part.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum LongPart {
+    /// The part's core segment with its radius: a capsule (round ends) or a
+    /// cylinder (flat ends).
+    Segment {
+        /// Flat end faces (a cylinder).
+        flat_ends: bool,
+    },
+    /// An oriented box.
+    Box(OrientedBox),
+}
 
 /// One convex part of an obstacle: a parry shape in its own frame and that
 /// frame's pose in the base frame.

@@ -2,7 +2,7 @@
 //! concurrency, connection caps and timeouts, and the optional bearer
 //! token.
 
-use super::auth::Token;
+use super::token::Token;
 use crate::{Error, Result};
 use std::net::SocketAddr;
 use std::time::Duration;

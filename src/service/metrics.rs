@@ -9,12 +9,8 @@
 //! templates, never raw paths, so cardinality stays bounded.
 
 use super::limits::LimiterLoad;
-use super::state::AppState;
 use crate::optim::seeds::restart::RESTART_MAX_ITERATIONS;
 use crate::optim::task::{MAX_ITERATIONS, MAX_RESTARTS};
-use axum::extract::{MatchedPath, Request, State};
-use axum::middleware::Next;
-use axum::response::Response;
 use prometheus_client::collector::Collector;
 use prometheus_client::encoding::{
     prometheus_text, DescriptorEncoder, EncodeLabelSet, EncodeMetric,
@@ -24,7 +20,7 @@ use prometheus_client::metrics::family::Family;
 use prometheus_client::metrics::gauge::{ConstGauge, Gauge};
 use prometheus_client::metrics::histogram::{exponential_buckets, Histogram};
 use prometheus_client::registry::Registry;
-use std::time::{Instant, SystemTime, UNIX_EPOCH};
+use std::time::{SystemTime, UNIX_EPOCH};
 
 /// Upper bounds (s) of the request-latency buckets.
 pub const LATENCY_BUCKETS_S: [f64; 14] = [
@@ -300,27 +296,6 @@ impl Collector for ProcessCollector {
         }
         Ok(())
     }
-}
-
-/// Middleware: count every request by its route template (never the raw
-/// path, so label cardinality stays bounded; unknown routes count as
-/// `unmatched`).
-pub async fn track(State(state): State<AppState>, request: Request, next: Next) -> Response {
-    let started = Instant::now();
-    let route = request
-        .extensions()
-        .get::<MatchedPath>()
-        .map(|p| p.as_str().to_string())
-        .unwrap_or_else(|| "unmatched".to_string());
-    let method = request.method().as_str().to_string();
-    let response = next.run(request).await;
-    let status = response.status().as_u16();
-    let seconds = started.elapsed().as_secs_f64();
-    state
-        .metrics()
-        .record_request(&route, &method, status, seconds);
-    tracing::info!(route = %route, method = %method, status, ms = seconds * 1e3, "request");
-    response
 }
 
 #[cfg(test)]

@@ -16,7 +16,7 @@
 //! blocking pool under a concurrency limit and a deadline counted from the
 //! request's arrival ([`limits`]); connections are capped and time out, and
 //! a shutdown drains within a time limit ([`server`]); an optional bearer
-//! token guards `/v1/*` and `/metrics` ([`auth`]); CORS is off unless
+//! token ([`token`]) guards `/v1/*` and `/metrics` ([`auth`]); CORS is off unless
 //! origins are configured. No endpoint reads a file path from a request.
 //!
 //! ```no_run
@@ -32,6 +32,7 @@
 
 pub mod auth;
 pub mod config;
+pub mod describe;
 pub mod error;
 pub mod extract;
 pub mod image;
@@ -40,6 +41,7 @@ pub mod metrics;
 pub mod routes;
 pub mod server;
 pub mod state;
+pub mod token;
 
 pub use config::ServiceConfig;
 pub use error::ApiError;
@@ -75,7 +77,7 @@ pub fn router(state: AppState) -> Router {
             state.clone(),
             server::layers::shutdown_gate,
         ))
-        .layer(from_fn_with_state(state.clone(), metrics::track))
+        .layer(from_fn_with_state(state.clone(), server::layers::track))
         .layer(axum::middleware::from_fn(server::layers::stamp_arrival));
     if let Some(cors) = cors_layer(&state.config().cors_origins) {
         app = app.layer(cors);

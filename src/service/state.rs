@@ -3,17 +3,21 @@
 //! shutdown flag. Cheap to clone (one `Arc`).
 
 use super::config::ServiceConfig;
+use super::describe;
 use super::image::DecodeBudget;
 use super::limits::Limiter;
 use super::metrics::Metrics;
-use super::routes;
-use super::server::layers::Arrival;
 use crate::net::Model;
 use crate::robot::Robot;
 use serde_json::Value;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
+
+/// When a request arrived (its headers were read): stamped by the
+/// outermost layer, read by [`AppState::deadline_of`].
+#[derive(Clone, Copy, Debug)]
+pub struct Arrival(pub Instant);
 
 /// Everything a handler needs; nothing in it is read from a request.
 #[derive(Clone, Debug)]
@@ -47,8 +51,8 @@ impl AppState {
         }
         let limiter = Limiter::new(config.max_concurrency, config.max_queue);
         let decode_budget = Arc::new(DecodeBudget::new(config.max_decoded_bytes));
-        let robot_info = to_json("robot", &routes::robot::describe(&robot))?;
-        let models_info = to_json("models", &routes::models::describe(model.as_ref()))?;
+        let robot_info = to_json("robot", &describe::robot(&robot))?;
+        let models_info = to_json("models", &describe::models(model.as_ref()))?;
         Ok(AppState {
             inner: Arc::new(Inner {
                 config,

@@ -15,7 +15,9 @@ pub mod losses;
 pub mod norm;
 pub mod phases;
 pub mod plan_eval;
+pub mod settings;
 pub mod tcp_loss;
 pub mod trainer;
 
-pub use trainer::{train, train_for, ShapeSettings, TrainOutcome, TrainSettings};
+pub use settings::{ShapeSettings, TrainSettings};
+pub use trainer::{train, train_for, TrainOutcome};

@@ -4,7 +4,8 @@
 //! satisfies every constraint of the file as written, and the generator
 //! reproducing the committed files byte for byte.
 
-use dpmp::bench::hard_set::{make_hard_one, HARD_CATEGORY, HARD_CLEARANCE_M};
+use dpmp::bench::hard_set::{make_hard_one, HARD_CLEARANCE_M};
+use dpmp::bench::problem_file::HARD_CATEGORY;
 use dpmp::bench::{load_dir, ProblemFile};
 use dpmp::optim::OptimizeRequest;
 use dpmp::robot::Robot;

@@ -4,7 +4,7 @@
 use crate::common::http::*;
 use crate::common::json::numbers;
 use crate::common::requests::typical_json;
-use dpmp::service::auth::Token;
+use dpmp::service::token::Token;
 use serde_json::{json, Value};
 
 #[test]

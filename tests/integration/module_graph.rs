@@ -15,24 +15,6 @@ use std::path::{Path, PathBuf};
 /// Longest file allowed in `src/`.
 const MAX_LINES: usize = 700;
 
-/// Folders whose children still import each other both ways, with the
-/// cycle's members: open work, listed so that no new cycle appears
-/// unnoticed. A folder leaves the list when its cycle is broken.
-const KNOWN_CYCLES: &[(&str, &[&str])] = &[
-    (
-        "bench",
-        &["hard_set", "make_problems", "problem_file", "runner"],
-    ),
-    ("scene", &["clip", "shape"]),
-    (
-        "service",
-        &["auth", "config", "metrics", "routes", "server", "state"],
-    ),
-];
-
-/// Files over [`MAX_LINES`], listed until they are split.
-const KNOWN_LONG: &[&str] = &["synth/settings.rs", "train/trainer.rs"];
-
 fn src() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("src")
 }
@@ -269,7 +251,7 @@ fn cycles(arrows: &BTreeSet<(String, String)>) -> Vec<Vec<String>> {
 }
 
 #[test]
-fn no_module_folder_has_a_new_import_cycle() {
+fn no_module_folder_has_an_import_cycle() {
     let g = graph();
     assert!(
         g.children
@@ -277,25 +259,14 @@ fn no_module_folder_has_a_new_import_cycle() {
             .is_some_and(|c| c.contains("scp")),
         "the graph reader found the optimiser's folders"
     );
-    let mut found = Vec::new();
-    for (parent, arrows) in &g.arrows {
-        for comp in cycles(arrows) {
-            found.push((parent.join("::"), comp));
-        }
-    }
-    let known: Vec<(String, Vec<String>)> = KNOWN_CYCLES
+    let found: Vec<(String, Vec<String>)> = g
+        .arrows
         .iter()
-        .map(|(p, c)| (p.to_string(), c.iter().map(|s| s.to_string()).collect()))
+        .flat_map(|(parent, arrows)| cycles(arrows).into_iter().map(|c| (parent.join("::"), c)))
         .collect();
-    let new: Vec<_> = found.iter().filter(|f| !known.contains(f)).collect();
     assert!(
-        new.is_empty(),
-        "new import cycles (folder, members): {new:?}"
-    );
-    let gone: Vec<_> = known.iter().filter(|k| !found.contains(k)).collect();
-    assert!(
-        gone.is_empty(),
-        "cycles broken: take them off KNOWN_CYCLES: {gone:?}"
+        found.is_empty(),
+        "import cycles (folder, members): {found:?}"
     );
 }
 
@@ -343,8 +314,7 @@ fn no_source_file_is_longer_than_the_limit() {
         .filter_map(|f| {
             let lines = std::fs::read_to_string(f).expect("read").lines().count();
             let rel = f.strip_prefix(src()).expect("under src/").to_string_lossy();
-            (lines > MAX_LINES && !KNOWN_LONG.contains(&rel.as_ref()))
-                .then(|| format!("{rel}: {lines} lines"))
+            (lines > MAX_LINES).then(|| format!("{rel}: {lines} lines"))
         })
         .collect();
     assert!(long.is_empty(), "over {MAX_LINES} lines: {long:?}");

@@ -4,21 +4,18 @@
 //!   [`Arrival`] extension; a request's deadline counts from it, so the
 //!   time spent reading the body, waiting for a solver and decoding is all
 //!   inside the deadline.
+//! - [`track`]: every request counted in the metrics by its route template.
 //! - [`shutdown_gate`]: once a shutdown has begun, every route but
 //!   `/healthz` and `/readyz` answers 503 `shutting_down`, and every answer
 //!   carries `connection: close`.
 
 use crate::service::error::ApiError;
-use crate::service::state::AppState;
-use axum::extract::{Request, State};
+use crate::service::state::{AppState, Arrival};
+use axum::extract::{MatchedPath, Request, State};
 use axum::http::{header, HeaderValue};
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 use std::time::Instant;
-
-/// When a request arrived (its headers were read).
-#[derive(Clone, Copy, Debug)]
-pub struct Arrival(pub Instant);
 
 /// Routes that keep answering during a shutdown (probes).
 const PROBES: [&str; 2] = ["/healthz", "/readyz"];
@@ -46,5 +43,26 @@ pub async fn shutdown_gate(
     response
         .headers_mut()
         .insert(header::CONNECTION, HeaderValue::from_static("close"));
+    response
+}
+
+/// Middleware: count every request by its route template (never the raw
+/// path, so label cardinality stays bounded; unknown routes count as
+/// `unmatched`).
+pub async fn track(State(state): State<AppState>, request: Request, next: Next) -> Response {
+    let started = Instant::now();
+    let route = request
+        .extensions()
+        .get::<MatchedPath>()
+        .map(|p| p.as_str().to_string())
+        .unwrap_or_else(|| "unmatched".to_string());
+    let method = request.method().as_str().to_string();
+    let response = next.run(request).await;
+    let status = response.status().as_u16();
+    let seconds = started.elapsed().as_secs_f64();
+    state
+        .metrics()
+        .record_request(&route, &method, status, seconds);
+    tracing::info!(route = %route, method = %method, status, ms = seconds * 1e3, "request");
     response
 }
