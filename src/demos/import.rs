@@ -183,7 +183,7 @@ pub fn import(
     let camera_model = manifest.camera.unwrap_or_else(|| {
         crate::synth::settings::SynthSettings::default()
             .camera
-            .model()
+            .model
     });
     camera_model
         .validate("camera")

@@ -57,11 +57,10 @@ pub struct CameraModel {
     pub mount_up_m: f64,
 }
 
-impl CameraModel {
+impl Intrinsics {
     /// Check every field; errors name `<prefix>.<field>`.
     pub fn validate(&self, prefix: &str) -> Result<()> {
-        let k = &self.intrinsics;
-        for (name, size) in [("width", k.width), ("height", k.height)] {
+        for (name, size) in [("width", self.width), ("height", self.height)] {
             if !(16..=4096).contains(&size) {
                 return Err(Error::invalid(
                     format!("{prefix}.{name}"),
@@ -69,7 +68,7 @@ impl CameraModel {
                 ));
             }
         }
-        for (name, v) in [("fx", k.fx), ("fy", k.fy)] {
+        for (name, v) in [("fx", self.fx), ("fy", self.fy)] {
             if !(v.is_finite() && v > 1.0) {
                 return Err(Error::invalid(
                     format!("{prefix}.{name}"),
@@ -77,7 +76,7 @@ impl CameraModel {
                 ));
             }
         }
-        for (name, v, size) in [("cx", k.cx, k.width), ("cy", k.cy, k.height)] {
+        for (name, v, size) in [("cx", self.cx, self.width), ("cy", self.cy, self.height)] {
             if !(v.is_finite() && v >= 0.0 && v <= size as f64) {
                 return Err(Error::invalid(
                     format!("{prefix}.{name}"),
@@ -85,6 +84,20 @@ impl CameraModel {
                 ));
             }
         }
+        Ok(())
+    }
+}
+
+impl CameraModel {
+    /// Check every field; errors name `<prefix>.intrinsics.<field>` and
+    /// `<prefix>.mount_back_m` / `<prefix>.mount_up_m` (the JSON paths).
+    pub fn validate(&self, prefix: &str) -> Result<()> {
+        self.intrinsics.validate(&format!("{prefix}.intrinsics"))?;
+        self.validate_mount(prefix)
+    }
+
+    /// Check the mount offsets; errors name `<prefix>.<field>`.
+    pub fn validate_mount(&self, prefix: &str) -> Result<()> {
         for (name, v) in [
             ("mount_back_m", self.mount_back_m),
             ("mount_up_m", self.mount_up_m),

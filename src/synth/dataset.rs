@@ -149,8 +149,8 @@ impl Manifest {
     pub fn camera_model(&self) -> crate::perception::CameraModel {
         match (&self.camera_model, &self.settings) {
             (Some(model), _) => *model,
-            (None, Some(settings)) => settings.camera.model(),
-            (None, None) => SynthSettings::default().camera.model(),
+            (None, Some(settings)) => settings.camera.model,
+            (None, None) => SynthSettings::default().camera.model,
         }
     }
 

@@ -89,7 +89,7 @@ impl Generator {
             ));
         }
         let basis = Basis::new(&PrompConfig::default())?;
-        let camera = Camera::at_home(&settings.camera.model(), &robot)?;
+        let camera = Camera::at_home(&settings.camera.model, &robot)?;
         let g = Generator {
             settings,
             robot,
@@ -355,7 +355,7 @@ impl Generator {
             seed: Some(seed),
             settings: Some(s.clone()),
             promp: self.basis.config().clone(),
-            camera: s.camera.model().intrinsics,
+            camera: s.camera.model.intrinsics,
             camera_model: None,
             depth_scale_m: None,
             robot: None,

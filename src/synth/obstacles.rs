@@ -99,7 +99,7 @@ mod tests {
 
     #[test]
     fn berries_are_berry_obstacles_that_contain_the_berry_surface() {
-        let cam = Camera::reference_home(&CameraSettings::default().model()).unwrap();
+        let cam = Camera::reference_home(&CameraSettings::default().model).unwrap();
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
         let plant = sample_plant(
             &PlantSettings::default(),

@@ -551,7 +551,7 @@ mod tests {
     use rand_chacha::ChaCha8Rng;
 
     fn plant(seed: u64, n: usize) -> Plant {
-        let cam = Camera::reference_home(&CameraSettings::default().model()).unwrap();
+        let cam = Camera::reference_home(&CameraSettings::default().model).unwrap();
         sample_plant(
             &PlantSettings::default(),
             &cam,
@@ -566,7 +566,7 @@ mod tests {
     #[test]
     fn berries_respect_region_spacing_and_view() {
         let s = PlantSettings::default();
-        let cam = Camera::reference_home(&CameraSettings::default().model()).unwrap();
+        let cam = Camera::reference_home(&CameraSettings::default().model).unwrap();
         for seed in 0..20 {
             let p = plant(seed, 5);
             assert_eq!(p.berries.len(), 5);
@@ -630,7 +630,7 @@ mod tests {
         let mut s = PlantSettings::default();
         s.region.max = s.region.min;
         s.max_berry_tries = 5;
-        let cam = Camera::reference_home(&CameraSettings::default().model()).unwrap();
+        let cam = Camera::reference_home(&CameraSettings::default().model).unwrap();
         let e = sample_plant(
             &s,
             &cam,

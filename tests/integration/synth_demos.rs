@@ -19,7 +19,7 @@ fn demos_start_at_home_reach_the_pregrasp_and_are_collision_free() {
     let home = robot.home();
     let tcp = robot.tcp_pose(&home);
     let cam = Camera::on_gripper(
-        &s.camera.model(),
+        &s.camera.model,
         Point3::from(tcp.translation.vector),
         tcp.rotation * Vector3::z(),
     )

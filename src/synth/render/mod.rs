@@ -202,7 +202,7 @@ mod tests {
 
     #[test]
     fn box_contains_the_rendered_silhouette_of_the_target() {
-        let cam = Camera::reference_home(&CameraSettings::default().model()).unwrap();
+        let cam = Camera::reference_home(&CameraSettings::default().model).unwrap();
         let mut rng = ChaCha8Rng::seed_from_u64(4);
         let plant = sample_plant(
             &PlantSettings::default(),

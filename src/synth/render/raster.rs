@@ -111,7 +111,7 @@ mod tests {
 
     #[test]
     fn nearer_shape_wins_and_rect_covers_projection() {
-        let cam = Camera::reference_home(&CameraSettings::default().model()).unwrap();
+        let cam = Camera::reference_home(&CameraSettings::default().model).unwrap();
         let ahead = |d: f64| cam.position() + cam.ray(320.0, 240.0) * d;
         let near = Shape::Capsule {
             a: ahead(0.3),

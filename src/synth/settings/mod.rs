@@ -7,7 +7,7 @@ mod demo;
 pub use demo::DemoSettings;
 
 use crate::error::{ensure_finite, ensure_in_range};
-use crate::perception::camera::{CameraModel, Intrinsics};
+use crate::perception::camera::CameraModel;
 use crate::{Error, Result};
 use serde::{Deserialize, Serialize};
 
@@ -220,73 +220,123 @@ fn probability(field: &str, p: f64) -> Result<()> {
     }
 }
 
-/// The gripper camera: intrinsics and its mount on the gripper.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
+/// The gripper camera of the synthetic data: the [`CameraModel`] the
+/// images are rendered through (and that the dataset records) and the
+/// border a target's box keeps.
+///
+/// Its JSON is flat, as settings files have always written it (`width`,
+/// `height`, `fx`, `fy`, `cx`, `cy`, `mount_back_m`, `mount_up_m`,
+/// `border_px`; each optional, unknown keys refused): serde's `flatten`
+/// cannot be combined with `deny_unknown_fields`, so the two impls below
+/// read and write the camera model's fields by name.
+#[derive(Clone, Debug, PartialEq)]
 pub struct CameraSettings {
-    /// Image width (px).
-    pub width: u32,
-    /// Image height (px).
-    pub height: u32,
-    /// Focal length x (px).
-    pub fx: f64,
-    /// Focal length y (px).
-    pub fy: f64,
-    /// Principal point x (px).
-    pub cx: f64,
-    /// Principal point y (px).
-    pub cy: f64,
-    /// Camera position behind the TCP along the gripper axis (m).
-    pub mount_back_m: f64,
-    /// Camera position above the gripper axis (m), towards world up.
-    pub mount_up_m: f64,
+    /// Intrinsics and mount.
+    pub model: CameraModel,
     /// Pixels a target's box must keep from the image border.
     pub border_px: f64,
 }
 
 impl Default for CameraSettings {
     fn default() -> Self {
-        let m = CameraModel::default();
-        let k = m.intrinsics;
         CameraSettings {
-            width: k.width,
-            height: k.height,
-            fx: k.fx,
-            fy: k.fy,
-            cx: k.cx,
-            cy: k.cy,
-            mount_back_m: m.mount_back_m,
-            mount_up_m: m.mount_up_m,
+            model: CameraModel::default(),
             border_px: 4.0,
         }
     }
 }
 
 impl CameraSettings {
-    /// The camera these settings describe.
-    pub fn model(&self) -> CameraModel {
-        CameraModel {
-            intrinsics: Intrinsics {
-                width: self.width,
-                height: self.height,
-                fx: self.fx,
-                fy: self.fy,
-                cx: self.cx,
-                cy: self.cy,
-            },
-            mount_back_m: self.mount_back_m,
-            mount_up_m: self.mount_up_m,
-        }
-    }
-
     /// Check every field; errors name `camera.<field>`.
     pub fn validate(&self) -> Result<()> {
-        self.model().validate("camera")?;
+        self.model.intrinsics.validate("camera")?;
+        self.model.validate_mount("camera")?;
         ensure_finite("camera.border_px", &[self.border_px])?;
         if self.border_px < 0.0 {
             return Err(Error::invalid("camera.border_px", "must be >= 0"));
         }
         Ok(())
+    }
+}
+
+/// The keys of [`CameraSettings`]' JSON, in the order it is written.
+const CAMERA_FIELDS: &[&str] = &[
+    "width",
+    "height",
+    "fx",
+    "fy",
+    "cx",
+    "cy",
+    "mount_back_m",
+    "mount_up_m",
+    "border_px",
+];
+
+impl Serialize for CameraSettings {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        use serde::ser::SerializeStruct;
+        let k = &self.model.intrinsics;
+        let mut out = s.serialize_struct("CameraSettings", CAMERA_FIELDS.len())?;
+        out.serialize_field("width", &k.width)?;
+        out.serialize_field("height", &k.height)?;
+        out.serialize_field("fx", &k.fx)?;
+        out.serialize_field("fy", &k.fy)?;
+        out.serialize_field("cx", &k.cx)?;
+        out.serialize_field("cy", &k.cy)?;
+        out.serialize_field("mount_back_m", &self.model.mount_back_m)?;
+        out.serialize_field("mount_up_m", &self.model.mount_up_m)?;
+        out.serialize_field("border_px", &self.border_px)?;
+        out.end()
+    }
+}
+
+impl<'de> Deserialize<'de> for CameraSettings {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        d.deserialize_struct("CameraSettings", CAMERA_FIELDS, CameraSettingsVisitor)
+    }
+}
+
+/// Reads the flat camera keys over the defaults.
+struct CameraSettingsVisitor;
+
+impl<'de> serde::de::Visitor<'de> for CameraSettingsVisitor {
+    type Value = CameraSettings;
+
+    fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        f.write_str("camera settings (an object with the keys ")?;
+        f.write_str(&CAMERA_FIELDS.join(", "))?;
+        f.write_str(")")
+    }
+
+    fn visit_map<A: serde::de::MapAccess<'de>>(
+        self,
+        mut map: A,
+    ) -> std::result::Result<CameraSettings, A::Error> {
+        use serde::de::Error as _;
+        let mut out = CameraSettings::default();
+        let mut seen = Vec::new();
+        while let Some(key) = map.next_key::<String>()? {
+            let Some(&name) = CAMERA_FIELDS.iter().find(|f| **f == key) else {
+                return Err(A::Error::unknown_field(&key, CAMERA_FIELDS));
+            };
+            if seen.contains(&name) {
+                return Err(A::Error::duplicate_field(name));
+            }
+            seen.push(name);
+            let model = &mut out.model;
+            match name {
+                "width" => model.intrinsics.width = map.next_value()?,
+                "height" => model.intrinsics.height = map.next_value()?,
+                "fx" => model.intrinsics.fx = map.next_value()?,
+                "fy" => model.intrinsics.fy = map.next_value()?,
+                "cx" => model.intrinsics.cx = map.next_value()?,
+                "cy" => model.intrinsics.cy = map.next_value()?,
+                "mount_back_m" => model.mount_back_m = map.next_value()?,
+                "mount_up_m" => model.mount_up_m = map.next_value()?,
+                _ => out.border_px = map.next_value()?,
+            }
+        }
+        Ok(out)
     }
 }
 
@@ -498,6 +548,54 @@ mod tests {
     #[test]
     fn defaults_are_valid() {
         SynthSettings::new(2, 5).validate().unwrap();
+    }
+
+    #[test]
+    fn camera_settings_keep_their_flat_json() {
+        // The bytes the settings files of every earlier dataset hold.
+        let flat = r#"{"width":640,"height":480,"fx":615.0,"fy":615.0,"cx":320.0,"cy":240.0,"mount_back_m":0.1,"mount_up_m":0.07,"border_px":4.0}"#;
+        let default = CameraSettings::default();
+        assert_eq!(serde_json::to_string(&default).unwrap(), flat);
+        let back: CameraSettings = serde_json::from_str(flat).unwrap();
+        assert_eq!(back, default);
+        assert_eq!(back.model, CameraModel::default());
+        // Missing keys keep their defaults; the given ones land in the model.
+        let some: CameraSettings =
+            serde_json::from_str(r#"{"fx": 600, "width": 320, "mount_up_m": 0.05}"#).unwrap();
+        assert_eq!(some.model.intrinsics.fx, 600.0);
+        assert_eq!(some.model.intrinsics.width, 320);
+        assert_eq!(some.model.intrinsics.fy, 615.0);
+        assert_eq!(some.model.mount_up_m, 0.05);
+        assert_eq!(some.border_px, 4.0);
+    }
+
+    #[test]
+    fn camera_settings_refuse_unknown_repeated_and_mistyped_keys() {
+        for (text, needle) in [
+            (r#"{"fov": 1.0}"#, "unknown field `fov`"),
+            (r#"{"intrinsics": {}}"#, "unknown field `intrinsics`"),
+            (r#"{"fx": 600, "fx": 610}"#, "duplicate field `fx`"),
+            (r#"{"width": 640.5}"#, "invalid type"),
+            (r#"{"cx": "320"}"#, "invalid type"),
+            (r#"[640, 480]"#, "invalid type"),
+        ] {
+            let e = serde_json::from_str::<CameraSettings>(text).unwrap_err();
+            assert!(e.to_string().contains(needle), "{text}: {e}");
+        }
+        let e = CameraSettings {
+            border_px: -1.0,
+            ..CameraSettings::default()
+        }
+        .validate()
+        .unwrap_err();
+        assert_eq!(e.field(), Some("camera.border_px"));
+        let mut bad = CameraSettings::default();
+        bad.model.intrinsics.fx = 0.5;
+        assert_eq!(bad.validate().unwrap_err().field(), Some("camera.fx"));
+        assert_eq!(
+            bad.model.validate("camera").unwrap_err().field(),
+            Some("camera.intrinsics.fx")
+        );
     }
 
     #[test]
