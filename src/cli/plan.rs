@@ -6,6 +6,7 @@ use crate::net::Model;
 use crate::optim::OptimizeRequest;
 use crate::perception::depth::{DepthImage, DEFAULT_DEPTH_SCALE_M};
 use crate::plan::{predict_and_optimize, GoalApproach, PlanInput, TargetInput};
+use crate::robot::Robot;
 use crate::{Error, Result};
 use clap::Args;
 use std::path::PathBuf;
@@ -14,16 +15,25 @@ use std::sync::Arc;
 /// Arguments of `dpmp plan`.
 #[derive(Debug, Args)]
 pub struct PlanArgs {
+    /// A target record of a dataset (`DATA/targets/<id>.json`, from `dpmp
+    /// data generate` or `data import`): plans it with its own image, box,
+    /// depth (when the dataset has it), camera, start, duration and scene,
+    /// instead of --image, --box and the rest.
+    #[arg(
+        long,
+        conflicts_with_all = ["image", "target_box", "mask_applied", "depth", "target_position", "scene", "camera", "duration"]
+    )]
+    pub record: Option<PathBuf>,
     /// Camera image (PNG or JPEG, any size).
-    #[arg(long)]
-    pub image: PathBuf,
+    #[arg(long, required_unless_present = "record")]
+    pub image: Option<PathBuf>,
     /// Target berry box in image pixels, `x1,y1,x2,y2` (top-left and
     /// bottom-right corners, x right and y down from the top-left pixel;
     /// at least 2 px each side, inside the image; not normalised).
     #[arg(
         long = "box",
         value_delimiter = ',',
-        required = true,
+        required_unless_present = "record",
         allow_negative_numbers = true
     )]
     pub target_box: Vec<f64>,
@@ -84,13 +94,76 @@ pub struct PlanArgs {
 
 /// Run `dpmp plan`.
 pub fn run(args: PlanArgs) -> Result<()> {
+    let (input, model, robot) = match &args.record {
+        Some(record) => {
+            let (model, robot) = load_model_and_robot(&args)?;
+            (record_input(&args, record)?, model, robot)
+        }
+        None => {
+            // The box, the image and the scene are checked before the model loads.
+            let flags = read_flags(&args)?;
+            let (model, robot) = load_model_and_robot(&args)?;
+            (flag_input(&args, &model, flags)?, model, robot)
+        }
+    };
+    let response = predict_and_optimize(&model, &robot, input, &Default::default())?;
+    crate::cli::print_json(&response)?;
+    crate::cli::require_optimal(args.require_optimal, response.result.status)
+}
+
+/// The model (`--model` or the shipped one) and the robot it was trained for.
+fn load_model_and_robot(args: &PlanArgs) -> Result<(Arc<Model>, Arc<Robot>)> {
+    if let Some(dir) = &args.model {
+        if !dir.join("config.json").is_file() {
+            return Err(Error::file(
+                dir,
+                "no trained model here (config.json missing): train one with `dpmp train` (see the README), or leave --model out for the shipped one",
+            ));
+        }
+    }
+    let model = Arc::new(Model::load_or_shipped(args.model.as_deref())?);
+    let robot = Arc::new(args.robot.load()?);
+    model.config().check_robot(&robot)?;
+    Ok((model, robot))
+}
+
+/// `--record`: the dataset target's own inputs, with `--clearance`, the
+/// goal flags and the approach.
+fn record_input(args: &PlanArgs, record: &std::path::Path) -> Result<PlanInput> {
+    let (dir, manifest, entry) = crate::train::plan_eval::find_record(record)?;
+    let (mut input, _) = crate::train::plan_eval::record_plan_input(
+        &dir,
+        &entry,
+        manifest.depth_scale_m(),
+        manifest.camera_model(),
+        args.clearance,
+    )?;
+    input.goal_standoff_m = args.goal_standoff;
+    input.approach = approach(args)?;
+    Ok(input)
+}
+
+/// What the flags give before the model is loaded: the image, the box
+/// (checked against it) and the request with the scene.
+struct Flags {
+    image: image::DynamicImage,
+    target_box: [f64; 4],
+    request: OptimizeRequest,
+}
+
+/// `--image`, `--box`, `--scene`, `--duration` and `--clearance`.
+fn read_flags(args: &PlanArgs) -> Result<Flags> {
+    let image_path = args
+        .image
+        .as_ref()
+        .ok_or_else(|| Error::invalid("--image", "required (or give --record)"))?;
     let target_box: [f64; 4] = args
         .target_box
         .clone()
         .try_into()
         .map_err(|_| Error::invalid("--box", "expected four numbers x1,y1,x2,y2"))?;
-    let image = image::open(&args.image)
-        .map_err(|e| Error::file(&args.image, format!("cannot read image: {e}")))?;
+    let image = image::open(image_path)
+        .map_err(|e| Error::file(image_path, format!("cannot read image: {e}")))?;
     crate::plan::check_target_box(&target_box, image.width(), image.height(), "--box")?;
     let obstacles = match &args.scene {
         Some(path) => crate::cli::read_json::<crate::scene::SceneFile>(path)?.obstacles,
@@ -103,17 +176,20 @@ pub fn run(args: PlanArgs) -> Result<()> {
         "obstacles": obstacles,
     }))
     .map_err(|e| Error::invalid("--scene", e.to_string()))?;
-    if let Some(dir) = &args.model {
-        if !dir.join("config.json").is_file() {
-            return Err(Error::file(
-                dir,
-                "no trained model here (config.json missing): train one with `dpmp train` (see the README), or leave --model out for the shipped one",
-            ));
-        }
-    }
-    let model = Arc::new(Model::load_or_shipped(args.model.as_deref())?);
-    let robot = Arc::new(args.robot.load()?);
-    model.config().check_robot(&robot)?;
+    Ok(Flags {
+        image,
+        target_box,
+        request,
+    })
+}
+
+/// The plan input of the flags (--image, --box, --depth, --camera, ...).
+fn flag_input(args: &PlanArgs, model: &Model, flags: Flags) -> Result<PlanInput> {
+    let Flags {
+        image,
+        target_box,
+        request,
+    } = flags;
     let camera = match &args.camera {
         Some(path) => {
             let camera: crate::perception::CameraModel = crate::fsio::read_json(path)?;
@@ -126,22 +202,19 @@ pub fn run(args: PlanArgs) -> Result<()> {
     };
     if args.depth.is_some() {
         let (w, h) = (image.width(), image.height());
-        crate::plan::check_camera_size(&model, camera.as_ref(), w, h, "--image")?;
+        crate::plan::check_camera_size(model, camera.as_ref(), w, h, "--image")?;
     }
-    let target = target_input(&args, &image)?;
-    let input = PlanInput {
+    let target = target_input(args, &image)?;
+    Ok(PlanInput {
         image,
         target_box,
         mask_applied: args.mask_applied,
         target,
         goal_standoff_m: args.goal_standoff,
         request,
-        approach: approach(&args)?,
+        approach: approach(args)?,
         camera,
-    };
-    let response = predict_and_optimize(&model, &robot, input, &Default::default())?;
-    crate::cli::print_json(&response)?;
-    crate::cli::require_optimal(args.require_optimal, response.result.status)
+    })
 }
 
 /// `--approach-axis` and `--approach-tolerance`, if an axis is given.

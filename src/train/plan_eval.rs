@@ -19,12 +19,12 @@ use crate::net::Model;
 use crate::optim::{OptimizeRequest, Status};
 use crate::plan::{predict_and_optimize, PlanInput, TargetInput};
 use crate::robot::Robot;
-use crate::synth::dataset::{self, TargetEntry};
+use crate::synth::dataset::{self, Manifest, TargetEntry, TargetRecord};
 use crate::{Error, Result};
 use nalgebra::Vector3;
 use rayon::prelude::*;
 use serde::Serialize;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 /// Clearance (m) every evaluation plan keeps from its scene.
@@ -103,6 +103,80 @@ pub fn evaluate_plans(
     }))
 }
 
+/// The plan input of one dataset target, as the evaluation and `dpmp plan
+/// --record` build it: the target's image, box and mask flag, its aligned
+/// depth when the dataset has one (in the dataset's `depth_scale_m`), the
+/// dataset's `camera`, the record's start configuration, duration and
+/// scene, and `clearance_m`. Returns the record beside it.
+pub fn record_plan_input(
+    dir: &Path,
+    entry: &TargetEntry,
+    depth_scale_m: f64,
+    camera: crate::perception::CameraModel,
+    clearance_m: f64,
+) -> Result<(PlanInput, TargetRecord)> {
+    let record = dataset::load_record(dir, entry)?;
+    let image = image::DynamicImage::ImageRgb8(dataset::load_image(dir, entry)?);
+    let target = match dataset::load_depth(dir, entry, depth_scale_m)? {
+        Some(depth) => TargetInput::Depth(depth, format!("depth of {}", entry.id)),
+        None => TargetInput::None,
+    };
+    let request: OptimizeRequest = serde_json::from_value(serde_json::json!({
+        "prior": {"mean": [], "cov": []},
+        "duration_s": record.duration_s,
+        "start": record.start,
+        "obstacles": record.scene.obstacles,
+        "clearance_m": clearance_m,
+    }))
+    .map_err(|e| Error::invalid("record", format!("{}: {e}", entry.id)))?;
+    let input = PlanInput {
+        image,
+        target_box: record.bbox,
+        mask_applied: entry.mask_applied,
+        target,
+        goal_standoff_m: None,
+        request,
+        approach: None,
+        camera: Some(camera),
+    };
+    Ok((input, record))
+}
+
+/// The dataset a target record file belongs to: the nearest folder above
+/// it with a `manifest.json`, the manifest, and the entry whose `record`
+/// is that file.
+pub fn find_record(record_file: &Path) -> Result<(PathBuf, Manifest, TargetEntry)> {
+    let not_found = |why: &str| Error::file(record_file, why.to_string());
+    let file = record_file
+        .canonicalize()
+        .map_err(|e| Error::file(record_file, e.to_string()))?;
+    let dir = file
+        .ancestors()
+        .skip(1)
+        .take(MANIFEST_SEARCH_DEPTH)
+        .find(|d| d.join("manifest.json").is_file())
+        .ok_or_else(|| {
+            not_found("no manifest.json in the folders above it: give a target record inside a dataset (DATA/targets/<id>.json)")
+        })?
+        .to_path_buf();
+    let manifest = dataset::load_manifest(&dir)?;
+    let entry = manifest
+        .targets
+        .iter()
+        .find(|e| dir.join(&e.record).canonicalize().is_ok_and(|p| p == file))
+        .cloned()
+        .ok_or_else(|| {
+            not_found(&format!(
+                "not a target record of the dataset at {}",
+                dir.display()
+            ))
+        })?;
+    Ok((dir, manifest, entry))
+}
+
+/// Folders above a record file searched for its dataset's manifest.
+const MANIFEST_SEARCH_DEPTH: usize = 3;
+
 /// The plan of one target, compared with its record.
 fn plan_one(
     model: &Arc<Model>,
@@ -112,28 +186,13 @@ fn plan_one(
     scale: f64,
     camera: crate::perception::CameraModel,
 ) -> Result<Outcome> {
-    let record = dataset::load_record(dir, entry)?;
-    let image = image::DynamicImage::ImageRgb8(dataset::load_image(dir, entry)?);
-    let depth = dataset::load_depth(dir, entry, scale)?
-        .ok_or_else(|| Error::invalid("depth", format!("target {} has no depth", entry.id)))?;
-    let request: OptimizeRequest = serde_json::from_value(serde_json::json!({
-        "prior": {"mean": [], "cov": []},
-        "duration_s": record.duration_s,
-        "start": record.start,
-        "obstacles": record.scene.obstacles,
-        "clearance_m": EVAL_CLEARANCE_M,
-    }))
-    .map_err(|e| Error::invalid("record", format!("{}: {e}", entry.id)))?;
-    let input = PlanInput {
-        image,
-        target_box: record.bbox,
-        mask_applied: entry.mask_applied,
-        target: TargetInput::Depth(depth, format!("depth of {}", entry.id)),
-        goal_standoff_m: None,
-        request,
-        approach: None,
-        camera: Some(camera),
-    };
+    let (input, record) = record_plan_input(dir, entry, scale, camera, EVAL_CLEARANCE_M)?;
+    if !matches!(input.target, TargetInput::Depth(..)) {
+        return Err(Error::invalid(
+            "depth",
+            format!("target {} has no depth", entry.id),
+        ));
+    }
     let answer = predict_and_optimize(model, robot, input, &Default::default())?;
     let last = answer
         .result

@@ -138,6 +138,72 @@ fn plan_args(dir: &Path, data: &Path, record: &Value) -> Vec<String> {
 }
 
 #[test]
+fn plan_a_dataset_record_directly() {
+    let dir = tempfile::tempdir().unwrap();
+    let (data, record) = one_plant(dir.path());
+    let record_file = data
+        .join("targets")
+        .join(format!("{}.json", record["id"].as_str().unwrap()));
+    assert!(record_file.is_file(), "{}", record_file.display());
+    let o = dpmp(&["plan", "--record", record_file.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let answer: Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(answer["status"], "optimal", "{}", answer["reason"]);
+    // The record's depth, start, duration and scene were used.
+    assert_eq!(answer["target"]["source"], "depth");
+    let points = answer["trajectory"]["points"].as_array().unwrap();
+    let first = numbers(&points[0]["positions"]);
+    let start = numbers(&record["start"]);
+    for (a, b) in first.iter().zip(&start) {
+        assert!(
+            (a - b).abs() < 1e-6,
+            "start {first:?} vs the record's {start:?}"
+        );
+    }
+    let end = points.last().unwrap()["time_from_start"].as_f64().unwrap();
+    let duration = record["duration_s"].as_f64().unwrap();
+    assert!((end - duration).abs() < 1e-9, "{end} vs {duration}");
+    let robot = Robot::panda().unwrap();
+    let tcp = final_tcp_pose(&robot, &answer).translation.vector;
+    let demos = numbers(&record["final_tcp"]["position"]);
+    let error = (tcp - nalgebra::Vector3::from_row_slice(&demos)).norm();
+    assert!(
+        error < 0.015,
+        "final TCP {error} m from the demonstrations' mean"
+    );
+
+    // The same target through the flags gives the same goal.
+    let args = plan_args(dir.path(), &data, &record);
+    let o = dpmp(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let flags: Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(flags["target"], answer["target"]);
+
+    // A record outside a dataset, and --record with --image, exit 2.
+    let stray = dir.path().join("stray.json");
+    std::fs::write(&stray, record.to_string()).unwrap();
+    let o = dpmp(&["plan", "--record", stray.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("stray.json") && err.contains("manifest.json"),
+        "{err}"
+    );
+    let o = dpmp(&[
+        "plan",
+        "--record",
+        record_file.to_str().unwrap(),
+        "--image",
+        "x.png",
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("--image"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
+#[test]
 fn plan_with_depth_ends_near_the_demonstrations() {
     let dir = tempfile::tempdir().unwrap();
     let (data, record) = one_plant(dir.path());
