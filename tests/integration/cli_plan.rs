@@ -108,6 +108,19 @@ fn plan_with_the_shipped_model_gives_a_valid_trajectory() {
     );
 }
 
+/// The plan's final TCP lies within 1.5 cm of the record's demonstrations'
+/// mean final TCP.
+fn assert_ends_near_the_demonstrations(answer: &Value, record: &Value) {
+    let robot = Robot::panda().unwrap();
+    let tcp = final_tcp_pose(&robot, answer).translation.vector;
+    let demos = numbers(&record["final_tcp"]["position"]);
+    let error = (tcp - nalgebra::Vector3::from_row_slice(&demos)).norm();
+    assert!(
+        error < 0.015,
+        "final TCP {error} m from the demonstrations' mean"
+    );
+}
+
 /// `dpmp plan --image … --box … --scene …` arguments for a generated record.
 fn plan_args(dir: &Path, data: &Path, record: &Value) -> Vec<String> {
     let b: Vec<String> = record["box"]
@@ -163,14 +176,7 @@ fn plan_a_dataset_record_directly() {
     let end = points.last().unwrap()["time_from_start"].as_f64().unwrap();
     let duration = record["duration_s"].as_f64().unwrap();
     assert!((end - duration).abs() < 1e-9, "{end} vs {duration}");
-    let robot = Robot::panda().unwrap();
-    let tcp = final_tcp_pose(&robot, &answer).translation.vector;
-    let demos = numbers(&record["final_tcp"]["position"]);
-    let error = (tcp - nalgebra::Vector3::from_row_slice(&demos)).norm();
-    assert!(
-        error < 0.015,
-        "final TCP {error} m from the demonstrations' mean"
-    );
+    assert_ends_near_the_demonstrations(&answer, &record);
 
     // The same target through the flags gives the same goal.
     let args = plan_args(dir.path(), &data, &record);
@@ -213,14 +219,7 @@ fn plan_with_depth_ends_near_the_demonstrations() {
     let answer: Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(answer["status"], "optimal", "{}", answer["reason"]);
     assert_eq!(answer["target"]["source"], "depth");
-    let robot = Robot::panda().unwrap();
-    let tcp = final_tcp_pose(&robot, &answer).translation.vector;
-    let demos = numbers(&record["final_tcp"]["position"]);
-    let error = (tcp - nalgebra::Vector3::from_row_slice(&demos)).norm();
-    assert!(
-        error < 0.015,
-        "final TCP {error} m from the demonstrations' mean"
-    );
+    assert_ends_near_the_demonstrations(&answer, &record);
 
     // A depth image of another size is refused, naming the file.
     let small = dir.path().join("small.png");
