@@ -216,6 +216,18 @@ pub fn predict_and_optimize(
     })
 }
 
+/// A goal standoff needs a 3-D target to stand off from; `field` names the
+/// standoff in the error (`goal_standoff_m`, `--goal-standoff`).
+pub fn check_standoff(standoff: Option<f64>, target: &TargetInput, field: &str) -> Result<()> {
+    if standoff.is_some() && matches!(target, TargetInput::None) {
+        return Err(Error::invalid(
+            field,
+            "applies only with a depth image or a target position",
+        ));
+    }
+    Ok(())
+}
+
 /// Standard deviation of the goal observation the prior is conditioned on
 /// (m): well inside the optimiser's goal tolerance, loose enough that the
 /// update stays a small, well-conditioned correction.

@@ -138,6 +138,7 @@ fn record_input(args: &PlanArgs, record: &std::path::Path) -> Result<PlanInput> 
         manifest.camera_model(),
         args.clearance,
     )?;
+    crate::plan::check_standoff(args.goal_standoff, &input.target, "--goal-standoff")?;
     input.goal_standoff_m = args.goal_standoff;
     input.approach = approach(args)?;
     Ok(input)
@@ -205,6 +206,7 @@ fn flag_input(args: &PlanArgs, model: &Model, flags: Flags) -> Result<PlanInput>
         crate::plan::check_camera_size(model, camera.as_ref(), w, h, "--image")?;
     }
     let target = target_input(args, &image)?;
+    crate::plan::check_standoff(args.goal_standoff, &target, "--goal-standoff")?;
     Ok(PlanInput {
         image,
         target_box,

@@ -184,6 +184,14 @@ fn plan_a_dataset_record_directly() {
     let flags: Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(flags["target"], answer["target"]);
 
+    // A standoff without depth or a target position is refused, not ignored.
+    let mut no_depth = args[..args.len() - 2].to_vec();
+    no_depth.extend(["--goal-standoff".into(), "0.2".into()]);
+    let o = dpmp(&no_depth.iter().map(String::as_str).collect::<Vec<_>>());
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("--goal-standoff"), "{err}");
+
     // A record outside a dataset, and --record with --image, exit 2.
     let stray = dir.path().join("stray.json");
     std::fs::write(&stray, record.to_string()).unwrap();

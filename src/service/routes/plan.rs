@@ -24,7 +24,8 @@ use crate::optim::OptimizeRequest;
 use crate::perception::depth::{DepthImage, DEFAULT_DEPTH_SCALE_M};
 use crate::perception::CameraModel;
 use crate::plan::{
-    check_target_position, predict_and_optimize, GoalApproach, PlanInput, PlanResponse, TargetInput,
+    check_standoff, check_target_position, predict_and_optimize, GoalApproach, PlanInput,
+    PlanResponse, TargetInput,
 };
 use crate::service::config::ServiceConfig;
 use crate::service::error::ApiError;
@@ -324,12 +325,7 @@ fn finish_input(
             "applies only with a depth image",
         ));
     }
-    if goal_standoff_m.is_some() && matches!(target, TargetInput::None) {
-        return Err(ApiError::invalid(
-            STANDOFF_FIELD,
-            "applies only with a depth image or a target position",
-        ));
-    }
+    check_standoff(goal_standoff_m, &target, STANDOFF_FIELD)?;
     let input = PlanInput {
         image,
         target_box,
