@@ -163,6 +163,8 @@ pub fn find_record(record_file: &Path) -> Result<(PathBuf, Manifest, TargetEntry
     let entry = manifest
         .targets
         .iter()
+        // Only entries with the same file name are resolved on disk.
+        .filter(|e| Path::new(&e.record).file_name() == file.file_name())
         .find(|e| dir.join(&e.record).canonicalize().is_ok_and(|p| p == file))
         .cloned()
         .ok_or_else(|| {
