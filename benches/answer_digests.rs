@@ -70,8 +70,7 @@ fn plan_digests(root: &Path, robot: Arc<Robot>) {
     use dpmp::synth::generate::Generator;
     use dpmp::synth::settings::SynthSettings;
     let models = ["models/rgb-only", "models/default"];
-    let generator =
-        Generator::new(SynthSettings::new(10, 1), (*robot).clone()).expect("generator");
+    let generator = Generator::new(SynthSettings::new(10, 1), (*robot).clone()).expect("generator");
     for dir in models {
         let Ok(model) = Model::load(&root.join(dir)) else {
             println!("{dir} absent");
@@ -86,19 +85,18 @@ fn plan_digests(root: &Path, robot: Arc<Robot>) {
                 (Some(depth), true) => TargetInput::Depth(depth.clone(), "depth".into()),
                 _ => TargetInput::None,
             };
-            let request: OptimizeRequest = serde_json::from_value(serde_json::json!({
-                "prior": {"mean": [], "cov": []},
-                "obstacles": record.scene.obstacles,
-                "clearance_m": 0.02,
-            }))
-            .expect("request");
+            let task = dpmp::optim::Task {
+                obstacles: record.scene.obstacles,
+                clearance_m: 0.02,
+                ..Default::default()
+            };
             let input = PlanInput {
                 image: image::DynamicImage::ImageRgb8(out.images[0].clone()),
                 target_box: record.bbox,
                 mask_applied: true,
                 target,
                 goal_standoff_m: None,
-                request,
+                task,
                 approach: None,
                 camera: None,
             };

@@ -121,17 +121,16 @@ fn plan(c: &mut Criterion) {
                 .encode_png()
                 .expect("png");
             let record = out.records[0].clone();
-            let request: dpmp::optim::OptimizeRequest = serde_json::from_value(serde_json::json!({
-                "prior": {"mean": [], "cov": []},
-                "obstacles": record.scene.obstacles,
-                "clearance_m": 0.02,
-            }))
-            .expect("request");
-            (jpeg, depth, record.bbox, request)
+            let task = dpmp::optim::Task {
+                obstacles: record.scene.obstacles,
+                clearance_m: 0.02,
+                ..Default::default()
+            };
+            (jpeg, depth, record.bbox, task)
         })
         .collect();
     let run = |model: &Arc<Model>, with_depth: bool| {
-        for (jpeg, depth, bbox, request) in &plants {
+        for (jpeg, depth, bbox, task) in &plants {
             let image = image::load_from_memory(jpeg).expect("decode");
             let target = if with_depth {
                 let d =
@@ -146,7 +145,7 @@ fn plan(c: &mut Criterion) {
                 mask_applied: true,
                 target,
                 goal_standoff_m: None,
-                request: request.clone(),
+                task: task.clone(),
                 approach: None,
                 camera: None,
             };

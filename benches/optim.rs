@@ -35,7 +35,7 @@ fn problems(robot: &Robot, n: usize, restarts: Option<usize>) -> Vec<OptimizeReq
         .map(|seed| {
             let mut request = typical_request(robot, seed, &settings).expect("example request");
             if let Some(r) = restarts {
-                request.options.restarts = r;
+                request.task.options.restarts = r;
             }
             request
         })
@@ -170,8 +170,8 @@ impl<'a> Variant<'a> {
             .iter()
             .map(|r| {
                 let mut r = r.clone();
-                r.options.inner_solver = inner;
-                r.boundary = boundary;
+                r.task.options.inner_solver = inner;
+                r.task.boundary = boundary;
                 r
             })
             .collect();

@@ -26,7 +26,7 @@
 //! or a client position's depth in the camera; it cannot plan without one.
 
 use crate::net::Model;
-use crate::optim::{optimize_with, Goal, OptimizeRequest, OptimizeResponse, SolveControl};
+use crate::optim::{optimize_prior, Goal, OptimizeResponse, SolveControl, Task};
 use crate::perception::{locate_target, Camera, CameraModel, DepthImage};
 use crate::promp::distribution::matrix_rows;
 use crate::promp::{Basis, FinalPointObservation, WeightDistribution};
@@ -72,8 +72,9 @@ pub struct PlanInput {
     pub target: TargetInput,
     /// Standoff of the derived goal (m); `None`: [`DEFAULT_GOAL_STANDOFF_M`].
     pub goal_standoff_m: Option<f64>,
-    /// The optimiser request; its prior is replaced by the prediction.
-    pub request: OptimizeRequest,
+    /// What to plan besides the prior (scene, limits, start, goal,
+    /// options); the prior is the network's prediction.
+    pub task: Task,
     /// An approach direction for the goal derived from the target.
     pub approach: Option<GoalApproach>,
     /// The camera that took the images, when not the model's (its
@@ -157,7 +158,7 @@ pub fn predict_and_optimize(
     input: PlanInput,
     ctl: &SolveControl,
 ) -> Result<PlanResponse> {
-    let mut request = input.request;
+    let mut task = input.task;
     let camera = input
         .camera
         .unwrap_or_else(|| model.config().camera_model());
@@ -166,7 +167,7 @@ pub fn predict_and_optimize(
     let target = match located {
         Some(located) => {
             let report = goal_from_target(robot, located, input.goal_standoff_m)?;
-            if request.goal.is_some() {
+            if task.goal.is_some() {
                 return Err(Error::invalid(
                     "goal",
                     "a goal is derived from the depth / target_position; send one or the other",
@@ -177,7 +178,7 @@ pub fn predict_and_optimize(
                 goal.approach_axis = Some(a.approach_axis);
                 goal.approach_tolerance_rad = a.approach_tolerance_rad;
             }
-            request.goal = Some(goal);
+            task.goal = Some(goal);
             Some(report)
         }
         None if input.approach.is_some() => {
@@ -197,17 +198,20 @@ pub fn predict_and_optimize(
             }
             other => other,
         })?;
-    let basis = Basis::new(&request.promp).map_err(|e| e.within("promp"))?;
+    let basis = task.basis()?;
     check_dimensions(&prediction.distribution, robot, &basis)?;
     check_model_prior(model, &prediction.distribution, robot, &basis)?;
     let distribution = match &target {
         Some(report) => prior_towards_goal(&prediction.distribution, robot, &basis, report)?,
         None => prediction.distribution,
     };
-    check_model_prior(model, &distribution, robot, &basis)?;
     let prior = prior_trajectory(&distribution, &basis);
-    request.prior = crate::optim::PriorSpec::from(&distribution);
-    let result = optimize_with(&request, robot, ctl)?;
+    // The optimiser checks the (conditioned) prior as it checks a
+    // request's; a prior it refuses came from the model.
+    let result = optimize_prior(&distribution, &task, &basis, robot, ctl).map_err(|e| match e {
+        Error::Invalid { ref field, .. } if field.starts_with("prior") => model_fault(model, &e),
+        other => other,
+    })?;
     Ok(PlanResponse {
         result,
         prior,
@@ -416,8 +420,7 @@ fn check_model_prior(
     robot: &Robot,
     basis: &Basis,
 ) -> Result<()> {
-    let spec = crate::optim::PriorSpec::from(d);
-    crate::optim::request::check_prior(&spec, robot.dof(), basis.n_basis())
+    crate::optim::request::check_prior(d, robot.dof(), basis.n_basis())
         .map_err(|e| model_fault(model, &e))
 }
 

@@ -165,7 +165,7 @@ fn base_request(
             ..Default::default()
         };
         let mut request = typical_request(robot, rng.gen(), &settings)?;
-        if let Some(goal) = request.goal.as_mut() {
+        if let Some(goal) = request.task.goal.as_mut() {
             goal.tolerance_m = HARD_GOAL_TOLERANCE_M;
         }
         let value = serde_json::to_value(&request)
@@ -205,7 +205,7 @@ fn with_intruders(
     let basis = problem.basis();
     let dist = problem.prior();
     let path = mean_path(robot, basis, dist);
-    let goal = parsed.goal.as_ref().map(|g| Vector3::from(g.position));
+    let goal = parsed.task.goal.as_ref().map(|g| Vector3::from(g.position));
     let mut placed = Vec::new();
     for k in 0..n {
         let Some(intruder) = place_intruder(robot, &path, goal, k, rng)? else {
@@ -239,7 +239,7 @@ fn intruders_only(
     robot: &Robot,
 ) -> Result<crate::optim::Problem> {
     let mut alone = parsed.clone();
-    alone.obstacles = intruders.to_vec();
+    alone.task.obstacles = intruders.to_vec();
     alone.validate(robot)
 }
 
@@ -299,8 +299,8 @@ fn place_intruder(
 pub fn long_search_label(request: &Value, robot: &Robot) -> Result<Expect> {
     let mut parsed: OptimizeRequest = serde_json::from_value(request.clone())
         .map_err(|e| Error::invalid("request", format!("does not parse: {e}")))?;
-    parsed.options.restarts = LABEL_RESTARTS;
-    parsed.options.max_iterations = LABEL_ITERATIONS;
+    parsed.task.options.restarts = LABEL_RESTARTS;
+    parsed.task.options.max_iterations = LABEL_ITERATIONS;
     let answer = optimize(&parsed, robot)?;
     if answer.status != Status::Optimal {
         return Ok(unknown());

@@ -236,12 +236,12 @@ fn fill(r: &mut RunRecord, min_expected: Option<f64>, t: &Timed) {
     r.min_clearance_m = rep.min_clearance_m;
     r.clearance_violation_m = rep
         .min_clearance_m
-        .map_or(0.0, |d| (req.clearance_m - d).max(0.0));
+        .map_or(0.0, |d| (req.task.clearance_m - d).max(0.0));
     r.limit_violation_rad = rep.max_joint_limit_violation_rad.max(0.0);
     r.velocity_excess = (rep.max_velocity_ratio - 1.0).max(0.0);
     r.goal_error_m = rep.goal_error_m;
     r.final_tcp_error_m = t.final_tcp_error_m;
-    r.goal_excess_m = match (&req.goal, rep.goal_error_m) {
+    r.goal_excess_m = match (&req.task.goal, rep.goal_error_m) {
         (Some(g), Some(e)) => (e - g.tolerance_m).max(0.0),
         _ => 0.0,
     };

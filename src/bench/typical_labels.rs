@@ -63,7 +63,7 @@ pub fn label_typical(
     let mut labels = Vec::with_capacity(count);
     for seed in 0..count as u64 {
         let mut request = typical_request(robot, seed, &settings)?;
-        request.options.restarts = restarts;
+        request.task.options.restarts = restarts;
         let response = optimize(&request, robot)?;
         let label = if response.status == Status::Optimal {
             let restarted = response

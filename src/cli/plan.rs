@@ -3,7 +3,7 @@
 //! `/v1/plan` response JSON. A shell over [`crate::plan`].
 
 use crate::net::Model;
-use crate::optim::OptimizeRequest;
+use crate::optim::Task;
 use crate::perception::depth::{DepthImage, DEFAULT_DEPTH_SCALE_M};
 use crate::plan::{predict_and_optimize, GoalApproach, PlanInput, TargetInput};
 use crate::robot::Robot;
@@ -149,7 +149,7 @@ fn record_input(args: &PlanArgs, record: &std::path::Path) -> Result<PlanInput> 
 struct Flags {
     image: image::DynamicImage,
     target_box: [f64; 4],
-    request: OptimizeRequest,
+    task: Task,
 }
 
 /// `--image`, `--box`, `--scene`, `--duration` and `--clearance`.
@@ -170,17 +170,16 @@ fn read_flags(args: &PlanArgs) -> Result<Flags> {
         Some(path) => crate::cli::read_json::<crate::scene::SceneFile>(path)?.obstacles,
         None => Vec::new(),
     };
-    let request: OptimizeRequest = serde_json::from_value(serde_json::json!({
-        "prior": {"mean": [], "cov": []},
-        "duration_s": args.duration,
-        "clearance_m": args.clearance,
-        "obstacles": obstacles,
-    }))
-    .map_err(|e| Error::invalid("--scene", e.to_string()))?;
+    let task = Task {
+        duration_s: args.duration,
+        clearance_m: args.clearance,
+        obstacles,
+        ..Task::default()
+    };
     Ok(Flags {
         image,
         target_box,
-        request,
+        task,
     })
 }
 
@@ -189,7 +188,7 @@ fn flag_input(args: &PlanArgs, model: &Model, flags: Flags) -> Result<PlanInput>
     let Flags {
         image,
         target_box,
-        request,
+        task,
     } = flags;
     let camera = match &args.camera {
         Some(path) => {
@@ -213,7 +212,7 @@ fn flag_input(args: &PlanArgs, model: &Model, flags: Flags) -> Result<PlanInput>
         mask_applied: args.mask_applied,
         target,
         goal_standoff_m: args.goal_standoff,
-        request,
+        task,
         approach: approach(args)?,
         camera,
     })

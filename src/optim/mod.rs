@@ -58,11 +58,12 @@ pub use report::{
     Closest, JointTrajectory, OptimizeResponse, SampleResult, Status, TrajectoryPoint,
     TrajectoryReport,
 };
-pub use request::{OptimizeRequest, PriorSpec};
+pub use request::{OptimizeRequest, PriorSpec, Task};
 pub use solution::{Solution, SolveControl, SolveStats};
 pub use task::{Boundary, Goal, InnerSolver, SolverOptions};
 pub use tolerances::FEASIBILITY_TOLERANCE;
 
+use crate::promp::{Basis, WeightDistribution};
 use crate::robot::Robot;
 use crate::Result;
 use std::time::Instant;
@@ -82,8 +83,35 @@ pub fn optimize_with(
     robot: &Robot,
     ctl: &SolveControl,
 ) -> Result<OptimizeResponse> {
+    respond(&request.task, ctl, &|task: &Task| {
+        request::validate_spec(&request.prior, task, robot)
+    })
+}
+
+/// [`optimize_with`] for a prior that is already a distribution (the
+/// network's, in [`crate::plan`]): the task validated with it
+/// ([`Task::validate`], which reuses `basis` when it is the task's), no
+/// round trip through the wire format; the same answer as the request
+/// with `PriorSpec::from(prior)`.
+pub fn optimize_prior(
+    prior: &WeightDistribution,
+    task: &Task,
+    basis: &Basis,
+    robot: &Robot,
+    ctl: &SolveControl,
+) -> Result<OptimizeResponse> {
+    respond(task, ctl, &|task: &Task| task.validate(robot, prior, basis))
+}
+
+/// Validate `task` (with its prior, by `validate`), diagnose, solve and
+/// verify; `validate` also builds the problems of the duration search.
+fn respond(
+    task: &Task,
+    ctl: &SolveControl,
+    validate: &dyn Fn(&Task) -> Result<Problem>,
+) -> Result<OptimizeResponse> {
     let started = Instant::now();
-    let problem = request.validate(robot)?;
+    let problem = validate(task)?;
     let mean = problem.prior().mean.as_slice().to_vec();
     let mut prior_mean_report = problem.evaluate_with(&mean, ctl);
     let mut warnings = problem.warnings().to_vec();
@@ -94,7 +122,7 @@ pub fn optimize_with(
     } else if let Some(proof) = problem.duration_proof() {
         let mut r = infeasible_at_prior_mean(&problem, mean, prior_mean_report, proof.reason);
         r.duration_lower_bound_s = proof.lower_bound_s;
-        r.min_duration_s = verified_duration(request, robot, proof.lower_bound_s, ctl);
+        r.min_duration_s = verified_duration(task, validate, proof.lower_bound_s, ctl);
         r
     } else {
         let solution = problem.solve(ctl)?;
@@ -144,14 +172,14 @@ fn infeasible_at_prior_mean(
 
 /// The first duration, from the proven lower bound up by
 /// [`infeasible::duration::DURATION_SEARCH_GROWTH`] each try, at which a verified
-/// solve of `request` (without its extra samples) reaches `optimal`;
+/// solve of `task` (without its extra samples) reaches `optimal`;
 /// `None` when none does within [`infeasible::duration::DURATION_SEARCH_BUDGET`], the
 /// caller's deadline or [`task::MAX_DURATION_S`]. The solve is
 /// deterministic, so the same request at the returned duration answers
 /// `optimal` again.
 fn verified_duration(
-    request: &OptimizeRequest,
-    robot: &Robot,
+    task: &Task,
+    validate: &dyn Fn(&Task) -> Result<Problem>,
     lower_bound: Option<f64>,
     ctl: &SolveControl,
 ) -> Option<f64> {
@@ -162,10 +190,10 @@ fn verified_duration(
     };
     let mut duration = lower_bound? * infeasible::duration::DURATION_SEARCH_GROWTH;
     while duration <= task::MAX_DURATION_S && !search.should_stop() {
-        let mut at = request.clone();
+        let mut at = task.clone();
         at.duration_s = (duration * 1000.0).ceil() / 1000.0;
         at.samples = 0;
-        let problem = at.validate(robot).ok()?;
+        let problem = validate(&at).ok()?;
         if problem.diagnose().is_none() && problem.duration_proof().is_none() {
             let solution = problem.solve(&search).ok()?;
             if solution.status == Status::Optimal {

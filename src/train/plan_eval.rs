@@ -16,7 +16,7 @@
 //! not depend on the thread count.
 
 use crate::net::Model;
-use crate::optim::{OptimizeRequest, Status};
+use crate::optim::{Status, Task};
 use crate::plan::{predict_and_optimize, PlanInput, TargetInput};
 use crate::robot::Robot;
 use crate::synth::dataset::{self, Manifest, TargetEntry, TargetRecord};
@@ -121,21 +121,20 @@ pub fn record_plan_input(
         Some(depth) => TargetInput::Depth(depth, format!("depth of {}", entry.id)),
         None => TargetInput::None,
     };
-    let request: OptimizeRequest = serde_json::from_value(serde_json::json!({
-        "prior": {"mean": [], "cov": []},
-        "duration_s": record.duration_s,
-        "start": record.start,
-        "obstacles": record.scene.obstacles,
-        "clearance_m": clearance_m,
-    }))
-    .map_err(|e| Error::invalid("record", format!("{}: {e}", entry.id)))?;
+    let task = Task {
+        duration_s: record.duration_s,
+        start: Some(record.start.clone()),
+        obstacles: record.scene.obstacles.clone(),
+        clearance_m,
+        ..Task::default()
+    };
     let input = PlanInput {
         image,
         target_box: record.bbox,
         mask_applied: entry.mask_applied,
         target,
         goal_standoff_m: None,
-        request,
+        task,
         approach: None,
         camera: Some(camera),
     };

@@ -32,7 +32,7 @@ fn every_hard_witness_verifies_and_every_prior_mean_is_blocked() {
     for p in &problems {
         assert_eq!(p.meta.category, HARD_CATEGORY, "{}", p.name);
         let request: OptimizeRequest = serde_json::from_value(p.request.clone()).unwrap();
-        assert_eq!(request.clearance_m, HARD_CLEARANCE_M, "{}", p.name);
+        assert_eq!(request.task.clearance_m, HARD_CLEARANCE_M, "{}", p.name);
         let problem = request.validate(&robot).unwrap();
         let mean = problem.prior().mean.as_slice().to_vec();
         let at_mean = problem.evaluate(&mean);

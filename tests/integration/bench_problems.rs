@@ -35,18 +35,18 @@ fn committed_suite_covers_every_category_with_valid_requests() {
             .validate(&robot)
             .unwrap_or_else(|e| panic!("{name}: {e}"));
         if p.meta.category == "infeasible" {
-            let scene = Scene::new(request.obstacles.clone()).unwrap();
-            let start = request.start.clone().unwrap();
+            let scene = Scene::new(request.task.obstacles.clone()).unwrap();
+            let start = request.task.start.clone().unwrap();
             let start_clear = scene
                 .min_clearance(&robot, &robot.fk(&start))
                 .unwrap()
                 .distance;
-            let g = request.goal.clone().unwrap().position;
+            let g = request.task.goal.clone().unwrap().position;
             let goal_blocked = scene
                 .obstacle_containing(&Point3::new(g[0], g[1], g[2]), 0.0)
                 .is_some();
             assert!(
-                start_clear < request.clearance_m || goal_blocked,
+                start_clear < request.task.clearance_m || goal_blocked,
                 "{name} is not infeasible by construction"
             );
         }
@@ -81,13 +81,13 @@ fn generated_problems_are_deterministic_and_their_constructions_bind() {
         other => panic!("unexpected prior {other:?}"),
     };
     let report = problem.evaluate(&mean);
-    assert!(report.min_clearance_m.unwrap() < request.clearance_m);
+    assert!(report.min_clearance_m.unwrap() < request.task.clearance_m);
 
     let inf = make_one(&g, "infeasible", 1, 78).unwrap();
     assert_eq!(inf.expect.feasible, Some(false));
     let request: OptimizeRequest = serde_json::from_value(inf.request.clone()).unwrap();
-    let g_pos = request.goal.clone().unwrap().position;
-    let scene = Scene::new(request.obstacles.clone()).unwrap();
+    let g_pos = request.task.goal.clone().unwrap().position;
+    let scene = Scene::new(request.task.obstacles.clone()).unwrap();
     assert!(scene
         .obstacle_containing(&Point3::new(g_pos[0], g_pos[1], g_pos[2]), 0.0)
         .is_some());

@@ -34,6 +34,7 @@ mod optim_exactness;
 mod optim_franka;
 mod optim_properties;
 mod optim_requests;
+mod optim_task;
 mod python_client;
 mod robot_cli;
 mod robot_collision_mesh;

@@ -31,8 +31,8 @@ fn equality_only_optimum_is_gaussian_conditioning() {
     let fin: Vec<f64> = (0..7)
         .map(|j| mean[(t, j)] - 0.02 + 0.005 * j as f64)
         .collect();
-    req.start = Some(start.clone());
-    req.options.final_configuration = Some(fin.clone());
+    req.task.start = Some(start.clone());
+    req.task.options.final_configuration = Some(fin.clone());
     let problem = req.validate(&robot).unwrap();
     let sol = problem.solve(&SolveControl::default()).unwrap();
     assert_eq!(sol.status, Status::Optimal, "{:?}", sol.reason);
@@ -83,7 +83,7 @@ fn equality_only_optimum_is_gaussian_conditioning() {
 fn binding_limits_agree_with_a_tightly_solved_rerun_and_cost_more_than_equalities_alone() {
     let (robot, mut req) = convex_request(5);
     // Joint 6's prior reaches ~3.24 rad: a 0.55 rad margin makes its limit bind.
-    req.joint_limit_margin_rad = 0.55;
+    req.task.joint_limit_margin_rad = 0.55;
     let problem = req.validate(&robot).unwrap();
     let prior_report = problem.evaluate(problem.prior().mean.as_slice());
     assert!(prior_report.max_joint_limit_violation_rad > 0.01);
@@ -93,7 +93,7 @@ fn binding_limits_agree_with_a_tightly_solved_rerun_and_cost_more_than_equalitie
     assert!(sol.mahalanobis > 0.0);
 
     let mut tight = req.clone();
-    tight.options.qp_tolerance = 1e-11;
+    tight.task.options.qp_tolerance = 1e-11;
     let tight_problem = tight.validate(&robot).unwrap();
     let tight_sol = tight_problem.solve(&SolveControl::default()).unwrap();
     assert_eq!(tight_sol.status, Status::Optimal);
@@ -169,8 +169,8 @@ fn default_options_solve_a_positive_definite_prior_exactly() {
     let start: Vec<f64> = (0..7)
         .map(|j| mean[(0, j)] + 0.02 * (j as f64 - 3.0))
         .collect();
-    req.start = Some(start.clone());
-    req.options.lambda = None;
+    req.task.start = Some(start.clone());
+    req.task.options.lambda = None;
     let problem = req.validate(&robot).unwrap();
     let sol = problem.solve(&SolveControl::default()).unwrap();
     assert_eq!(sol.status, Status::Optimal, "{:?}", sol.reason);
@@ -199,7 +199,7 @@ fn default_options_solve_a_positive_definite_prior_exactly() {
     );
     // The former default (λ = 1e-6 × the mean variance) for comparison.
     let mut old = req.clone();
-    old.options.lambda = Some(1e-6 * pd.cov.trace() / n as f64);
+    old.task.options.lambda = Some(1e-6 * pd.cov.trace() / n as f64);
     let old_problem = old.validate(&robot).unwrap();
     let old_sol = old_problem.solve(&SolveControl::default()).unwrap();
     let old_traj = old_problem.trajectory(&old_sol.weights);

@@ -112,14 +112,14 @@ fn swing_request(robot: &Robot) -> (OptimizeRequest, Vec<f64>) {
         ..Default::default()
     };
     let mut req = typical_request(robot, 0, &settings).unwrap();
-    req.promp.n_samples = 5;
-    req.options.verify_factor = 4;
-    req.duration_s = 2.0;
-    req.clearance_m = 0.0;
+    req.task.promp.n_samples = 5;
+    req.task.options.verify_factor = 4;
+    req.task.duration_s = 2.0;
+    req.task.clearance_m = 0.0;
     let PriorSpec::Full { mean, .. } = &req.prior else {
         panic!("typical requests carry a full prior");
     };
-    let nb = req.promp.n_basis;
+    let nb = req.task.promp.n_basis;
     let mut w = mean.clone();
     for (i, wi) in w.iter_mut().take(nb).enumerate() {
         *wi = -1.5 + 3.0 * i as f64 / (nb - 1) as f64;
@@ -133,7 +133,7 @@ fn an_obstacle_between_two_samples_is_caught() {
     let (mut req, w) = swing_request(&robot);
     let problem = req.validate(&robot).unwrap();
     let basis = problem.basis().resampled(20).unwrap();
-    let nb = req.promp.n_basis;
+    let nb = req.task.promp.n_basis;
     let wm = DMatrix::from_fn(nb, 7, |i, j| w[j * nb + i]);
     // Find a point the robot covers at the middle of a verification
     // interval but clears at both of its samples.
@@ -141,9 +141,9 @@ fn an_obstacle_between_two_samples_is_caught() {
     let mut found = None;
     'search: for k in 0..phases.len() - 1 {
         let mid = 0.5 * (phases[k] + phases[k + 1]);
-        let (qm, _) = state(&basis, &wm, mid, req.duration_s);
-        let (qa, _) = state(&basis, &wm, phases[k], req.duration_s);
-        let (qb, _) = state(&basis, &wm, phases[k + 1], req.duration_s);
+        let (qm, _) = state(&basis, &wm, mid, req.task.duration_s);
+        let (qa, _) = state(&basis, &wm, phases[k], req.task.duration_s);
+        let (qb, _) = state(&basis, &wm, phases[k + 1], req.task.duration_s);
         for p in robot_points(&robot, &qm) {
             let ball = Scene::new(vec![sphere("slipped", p.into(), 0.003)]).unwrap();
             let clear = |q: &[f64]| ball.min_clearance(&robot, &robot.fk(q)).unwrap().distance;
@@ -154,7 +154,7 @@ fn an_obstacle_between_two_samples_is_caught() {
         }
     }
     let (centre, mid) = found.expect("a fast swing leaves points between its samples");
-    req.obstacles = vec![sphere("slipped", centre.into(), 0.003)];
+    req.task.obstacles = vec![sphere("slipped", centre.into(), 0.003)];
     let problem = req.validate(&robot).unwrap();
     let report = problem.evaluate(&w);
     // Clear at every verification sample, penetrating in between: the
@@ -163,8 +163,8 @@ fn an_obstacle_between_two_samples_is_caught() {
     let continuous = report.continuous_clearance_m.unwrap();
     assert!(continuous < 0.0, "{report:?}");
     assert!(!problem.is_feasible(&report));
-    let (qm, _) = state(&basis, &wm, mid, req.duration_s);
-    let scene = Scene::new(req.obstacles.clone()).unwrap();
+    let (qm, _) = state(&basis, &wm, mid, req.task.duration_s);
+    let scene = Scene::new(req.task.obstacles.clone()).unwrap();
     let truth = scene
         .min_clearance(&robot, &robot.fk(&qm))
         .unwrap()
@@ -185,7 +185,7 @@ fn an_obstacle_between_two_samples_is_caught() {
         let out = DVector::from_column_slice(&resp.weights);
         let wm = DMatrix::from_fn(nb, 7, |i, j| out[j * nb + i]);
         for s in 0..=2000 {
-            let (q, _) = state(&basis, &wm, s as f64 / 2000.0, req.duration_s);
+            let (q, _) = state(&basis, &wm, s as f64 / 2000.0, req.task.duration_s);
             let d = scene.min_clearance(&robot, &robot.fk(&q)).unwrap().distance;
             assert!(
                 d >= -1e-6,

@@ -73,7 +73,7 @@ fn request(prior: &PriorSpec, robot: &Robot, margin: f64) -> OptimizeRequest {
     let mut req: OptimizeRequest = serde_json::from_value(json).unwrap();
     let p = req.validate(robot).unwrap();
     let mean = p.prior().trajectory_mean(p.basis());
-    req.start = Some(
+    req.task.start = Some(
         (0..7)
             .map(|j| mean[(0, j)] + 0.03 * (j as f64 - 3.0))
             .collect(),
@@ -99,7 +99,7 @@ fn shifted_prior(p: &Problem) -> WeightDistribution {
 fn conditioned(p: &Problem, req: &OptimizeRequest) -> DVector<f64> {
     let via = ViaPoint {
         phase: 0.0,
-        q: req.start.clone().unwrap(),
+        q: req.task.start.clone().unwrap(),
         noise_var: 0.0,
     };
     shifted_prior(p).condition(p.basis(), &[via]).unwrap().mean
@@ -181,7 +181,7 @@ fn direct_solve(
     let nb = p.prior().n_basis;
     let dense = p
         .basis()
-        .resampled(req.promp.n_samples * req.options.verify_factor)
+        .resampled(req.task.promp.n_samples * req.task.options.verify_factor)
         .unwrap();
     let mut qp = Qp::new(mean.len());
     let rows_of = |psi: DVector<f64>, j: usize| -> (DVector<f64>, f64) {
@@ -197,7 +197,7 @@ fn direct_solve(
     for basis in sets {
         for (i, _) in basis.phases().iter().enumerate() {
             let psi = basis.matrix().row(i).transpose();
-            let dpsi = basis.derivative().row(i).transpose() / req.duration_s;
+            let dpsi = basis.derivative().row(i).transpose() / req.task.duration_s;
             for (j, lim) in limits.iter().enumerate() {
                 let (a, c) = rows_of(psi.clone(), j);
                 qp.inequalities.push(Inequality {
@@ -225,7 +225,7 @@ fn direct_solve(
         }
     }
     let psi0 = p.basis().matrix().row(0).transpose();
-    for (j, q0) in req.start.as_ref().unwrap().iter().enumerate() {
+    for (j, q0) in req.task.start.as_ref().unwrap().iter().enumerate() {
         let (a, c) = rows_of(psi0.clone(), j);
         qp.equalities.push((a, q0 - c));
     }

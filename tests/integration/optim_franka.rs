@@ -40,8 +40,8 @@ fn rest_phase(tau: f64) -> f64 {
 /// the phase the timing gives (positions only; derivatives below are
 /// finite differences of this).
 fn position(req: &OptimizeRequest, basis: &Basis, weights: &[f64], j: usize, t: f64) -> f64 {
-    let tau = t / req.duration_s;
-    let s = match req.boundary {
+    let tau = t / req.task.duration_s;
+    let s = match req.task.boundary {
         Boundary::Rest => rest_phase(tau),
         Boundary::Free => tau,
     };
@@ -54,9 +54,9 @@ fn position(req: &OptimizeRequest, basis: &Basis, weights: &[f64], j: usize, t: 
 /// jerk ratio]` of `weights` at `factor` × the request's sampling, by
 /// central finite differences of positions in time.
 fn dense_figures(req: &OptimizeRequest, weights: &[f64], factor: usize) -> [f64; 4] {
-    let basis = Basis::new(&req.promp).unwrap();
-    let h = 1e-4 * req.duration_s;
-    let n = req.promp.n_samples * factor;
+    let basis = Basis::new(&req.task.promp).unwrap();
+    let h = 1e-4 * req.task.duration_s;
+    let n = req.task.promp.n_samples * factor;
     let mut out = [0.0f64; 4];
     for j in 0..7 {
         let q = |t: f64| position(req, &basis, weights, j, t);
@@ -67,15 +67,15 @@ fn dense_figures(req: &OptimizeRequest, weights: &[f64], factor: usize) -> [f64;
                 / (2.0 * h * h * h);
             (v, a, jerk)
         };
-        for t in [0.0, req.duration_s] {
+        for t in [0.0, req.task.duration_s] {
             let (v, a, _) = derivatives(t);
             out[0] = out[0].max(v.abs());
             out[1] = out[1].max(a.abs());
         }
         for k in 0..n {
-            let t = req.duration_s * k as f64 / (n - 1) as f64;
+            let t = req.task.duration_s * k as f64 / (n - 1) as f64;
             let (_, a, jerk) = derivatives(t);
-            let limit = FRANKA_ACCELERATION[j] * req.acceleration_scaling;
+            let limit = FRANKA_ACCELERATION[j] * req.task.acceleration_scaling;
             out[2] = out[2].max(a.abs() / limit);
             out[3] = out[3].max(jerk.abs() / FRANKA_JERK[j]);
         }
@@ -124,14 +124,12 @@ fn typical_problems_end_at_rest_within_franka_s_limits() {
     let robot = panda();
     for seed in 0..3 {
         let req = typical_request(&robot, seed, &ExampleSettings::default()).unwrap();
-        assert_eq!(req.boundary, Boundary::Rest);
+        assert_eq!(req.task.boundary, Boundary::Rest);
         let resp = optimal(&req, &robot, seed);
         assert_franka_feasible(&req, &resp, &format!("seed {seed}"));
         // The same path with free ends does not stop: rest is the timing's.
-        let free = OptimizeRequest {
-            boundary: Boundary::Free,
-            ..req.clone()
-        };
+        let mut free = req.clone();
+        free.task.boundary = Boundary::Free;
         let moving = dense_figures(&free, &resp.weights, 1);
         assert!(moving[0] > 1e-3, "seed {seed}: the path itself rests");
         // The returned trajectory's first and last points stand still.
@@ -157,8 +155,8 @@ fn mean_weights(req: &OptimizeRequest, robot: &Robot) -> Vec<f64> {
 fn a_tight_acceleration_scaling_is_met_or_explained() {
     let robot = panda();
     let mut req = typical_request(&robot, 5, &ExampleSettings::default()).unwrap();
-    req.acceleration_scaling = 0.3;
-    req.velocity_scaling = 0.5;
+    req.task.acceleration_scaling = 0.3;
+    req.task.velocity_scaling = 0.5;
     let resp = optimize(&req, &robot).unwrap();
     match resp.status {
         Status::Optimal => {
@@ -171,7 +169,7 @@ fn a_tight_acceleration_scaling_is_met_or_explained() {
 
 /// The gripper's z axis at the end of `weights`' trajectory.
 fn final_gripper_axis(req: &OptimizeRequest, robot: &Robot, weights: &[f64]) -> Vector3<f64> {
-    let basis = Basis::new(&req.promp).unwrap();
+    let basis = Basis::new(&req.task.promp).unwrap();
     let psi = basis.row_at(1.0);
     let nb = basis.n_basis();
     let q: Vec<f64> = (0..7)
@@ -192,7 +190,7 @@ fn the_gripper_ends_within_the_approach_tolerance() {
         let axis =
             nalgebra::UnitQuaternion::from_axis_angle(&nalgebra::Unit::new_normalize(side), 0.25)
                 * axis0;
-        let goal = req.goal.as_mut().unwrap();
+        let goal = req.task.goal.as_mut().unwrap();
         goal.approach_axis = Some([axis.x, axis.y, axis.z]);
         goal.approach_tolerance_rad = 0.1;
         let resp = optimal(&req, &robot, seed);
@@ -219,8 +217,8 @@ fn duration_request(seed: u64, duration_s: f64) -> OptimizeRequest {
         "start": row(0),
     }))
     .unwrap();
-    req.options.final_configuration = Some(row(basis.n_samples() - 1));
-    req.options.restarts = 0;
+    req.task.options.final_configuration = Some(row(basis.n_samples() - 1));
+    req.task.options.restarts = 0;
     req
 }
 
@@ -259,7 +257,7 @@ proptest! {
         let check_lengths = |req: &OptimizeRequest, resp: &dpmp::optim::OptimizeResponse| {
             let rates = req.validate(&robot).unwrap().joint_rates();
             for (j, length) in joint_path_lengths(resp).iter().enumerate() {
-                let bound = rates[j].path_length_bound(req.duration_s);
+                let bound = rates[j].path_length_bound(req.task.duration_s);
                 assert!(*length <= bound * (1.0 + 1e-3) + 1e-9, "joint {j}: {length} > {bound}");
             }
         };
@@ -307,7 +305,7 @@ fn field_of(mut edit: impl FnMut(&mut OptimizeRequest)) -> String {
 #[test]
 fn bad_limits_scalings_and_axes_are_named() {
     let axis = |a: [f64; 3]| {
-        move |r: &mut OptimizeRequest| r.goal.as_mut().unwrap().approach_axis = Some(a)
+        move |r: &mut OptimizeRequest| r.task.goal.as_mut().unwrap().approach_axis = Some(a)
     };
     assert_eq!(field_of(axis([0.0, 0.0, 0.0])), "goal.approach_axis");
     assert_eq!(field_of(axis([0.0, 0.0, 2.0])), "goal.approach_axis");
@@ -318,22 +316,28 @@ fn bad_limits_scalings_and_axes_are_named() {
     assert_eq!(
         field_of(|r| {
             axis([0.0, 0.0, 1.0])(r);
-            r.goal.as_mut().unwrap().approach_tolerance_rad = 0.0;
+            r.task.goal.as_mut().unwrap().approach_tolerance_rad = 0.0;
         }),
         "goal.approach_tolerance_rad"
     );
-    assert_eq!(field_of(|r| r.velocity_scaling = 0.0), "velocity_scaling");
-    assert_eq!(field_of(|r| r.velocity_scaling = 1.5), "velocity_scaling");
     assert_eq!(
-        field_of(|r| r.acceleration_scaling = f64::NAN),
+        field_of(|r| r.task.velocity_scaling = 0.0),
+        "velocity_scaling"
+    );
+    assert_eq!(
+        field_of(|r| r.task.velocity_scaling = 1.5),
+        "velocity_scaling"
+    );
+    assert_eq!(
+        field_of(|r| r.task.acceleration_scaling = f64::NAN),
         "acceleration_scaling"
     );
     assert_eq!(
-        field_of(|r| r.acceleration_limits = Some(vec![1.0; 6])),
+        field_of(|r| r.task.acceleration_limits = Some(vec![1.0; 6])),
         "acceleration_limits"
     );
     assert_eq!(
-        field_of(|r| r.jerk_limits = Some(vec![1.0, 1.0, -1.0, 1.0, 1.0, 1.0, 1.0])),
+        field_of(|r| r.task.jerk_limits = Some(vec![1.0, 1.0, -1.0, 1.0, 1.0, 1.0, 1.0])),
         "jerk_limits[2]"
     );
 }

@@ -41,8 +41,8 @@ proptest! {
                 prop_assert!(problem.is_feasible(&resp.report));
                 // Relaxation: only the start equality (and the limits).
                 let mut relaxed = req.clone();
-                relaxed.obstacles.clear();
-                relaxed.goal = None;
+                relaxed.task.obstacles.clear();
+                relaxed.task.goal = None;
                 let rp = relaxed.validate(&robot).unwrap();
                 let r = rp.solve(&SolveControl::default()).unwrap();
                 if r.status == Status::Optimal {
@@ -61,11 +61,11 @@ proptest! {
         let robot = Robot::panda().unwrap();
         let settings = ExampleSettings { n_obstacles: 0, ..Default::default() };
         let mut req = typical_request(&robot, seed, &settings).unwrap();
-        req.options.max_iterations = 6;
+        req.task.options.max_iterations = 6;
         // A box between the start TCP and the goal that the arm cannot pass:
         // the goal lies beyond a wall spanning the whole reachable space.
-        let goal = req.goal.as_ref().unwrap().position;
-        req.obstacles.push(dpmp::scene::Obstacle {
+        let goal = req.task.goal.as_ref().unwrap().position;
+        req.task.obstacles.push(dpmp::scene::Obstacle {
             id: "wall".into(),
             shape: dpmp::scene::ObstacleShape::Box(dpmp::geometry::OrientedBox {
                 center: [goal[0] - 0.08, 0.0, 0.5],

@@ -60,43 +60,43 @@ fn bad_input_names_the_field() {
     }
     assert_eq!(field_of(&r, &robot), "prior.cov[4][3]");
     let mut r = base.clone();
-    r.start = Some(vec![0.0; 6]);
+    r.task.start = Some(vec![0.0; 6]);
     assert_eq!(field_of(&r, &robot), "start");
     let mut r = base.clone();
-    r.start.as_mut().unwrap()[2] = f64::INFINITY;
+    r.task.start.as_mut().unwrap()[2] = f64::INFINITY;
     assert_eq!(field_of(&r, &robot), "start[2]");
     let mut r = base.clone();
-    r.duration_s = -1.0;
+    r.task.duration_s = -1.0;
     assert_eq!(field_of(&r, &robot), "duration_s");
     let mut r = base.clone();
-    r.clearance_m = -0.01;
+    r.task.clearance_m = -0.01;
     assert_eq!(field_of(&r, &robot), "clearance_m");
     let mut r = base.clone();
-    r.joint_limit_margin_rad = 2.0;
+    r.task.joint_limit_margin_rad = 2.0;
     assert_eq!(field_of(&r, &robot), "joint_limit_margin_rad");
     let mut r = base.clone();
-    r.samples = 1000;
+    r.task.samples = 1000;
     assert_eq!(field_of(&r, &robot), "samples");
     let mut r = base.clone();
-    r.promp.n_samples = 5000;
+    r.task.promp.n_samples = 5000;
     assert_eq!(field_of(&r, &robot), "promp.n_samples");
     let mut r = base.clone();
-    r.promp.n_basis = 6;
+    r.task.promp.n_basis = 6;
     assert_eq!(field_of(&r, &robot), "prior.mean");
     let mut r = base.clone();
-    r.goal.as_mut().unwrap().tolerance_m = 0.0;
+    r.task.goal.as_mut().unwrap().tolerance_m = 0.0;
     assert_eq!(field_of(&r, &robot), "goal.tolerance_m");
     let mut r = base.clone();
-    r.goal.as_mut().unwrap().position[1] = f64::NAN;
+    r.task.goal.as_mut().unwrap().position[1] = f64::NAN;
     assert_eq!(field_of(&r, &robot), "goal.position[1]");
     let mut r = base.clone();
-    r.options.verify_factor = 2;
+    r.task.options.verify_factor = 2;
     assert_eq!(field_of(&r, &robot), "options.verify_factor");
     let mut r = base.clone();
-    r.options.activation_distance_m = Some(0.001);
+    r.task.options.activation_distance_m = Some(0.001);
     assert_eq!(field_of(&r, &robot), "options.activation_distance_m");
     let mut r = base.clone();
-    if let ObstacleShape::Sphere(Sphere { radius, .. }) = &mut r.obstacles[0].shape {
+    if let ObstacleShape::Sphere(Sphere { radius, .. }) = &mut r.task.obstacles[0].shape {
         *radius = -1.0;
     }
     assert!(
@@ -115,9 +115,9 @@ fn bad_input_names_the_field() {
     // Defaults from DESIGN.md.
     let minimal: OptimizeRequest =
         serde_json::from_value(serde_json::json!({"prior": json["prior"].clone()})).unwrap();
-    assert_eq!(minimal.duration_s, 4.0);
-    assert_eq!(minimal.clearance_m, 0.02);
-    assert_eq!(minimal.promp.n_samples, 150);
+    assert_eq!(minimal.task.duration_s, 4.0);
+    assert_eq!(minimal.task.clearance_m, 0.02);
+    assert_eq!(minimal.task.promp.n_samples, 150);
     assert!(minimal.validate(&robot).is_ok());
 }
 
@@ -126,7 +126,7 @@ fn infeasible_cases_are_diagnosed_with_the_constraint() {
     let (robot, base) = request(2, 3);
     // Start outside the joint limits.
     let mut r = base.clone();
-    r.start.as_mut().unwrap()[3] = 0.5;
+    r.task.start.as_mut().unwrap()[3] = 0.5;
     let resp = optimize(&r, &robot).unwrap();
     assert_eq!(resp.status, Status::Infeasible);
     assert!(
@@ -136,8 +136,11 @@ fn infeasible_cases_are_diagnosed_with_the_constraint() {
     );
     // Start in collision: a sphere on the start TCP.
     let mut r = base.clone();
-    let tcp = robot.tcp_pose(r.start.as_ref().unwrap()).translation.vector;
-    r.obstacles.push(sphere("blocker", tcp.into(), 0.03));
+    let tcp = robot
+        .tcp_pose(r.task.start.as_ref().unwrap())
+        .translation
+        .vector;
+    r.task.obstacles.push(sphere("blocker", tcp.into(), 0.03));
     let resp = optimize(&r, &robot).unwrap();
     assert_eq!(resp.status, Status::Infeasible);
     let reason = resp.reason.unwrap();
@@ -147,15 +150,15 @@ fn infeasible_cases_are_diagnosed_with_the_constraint() {
     );
     // Goal out of reach.
     let mut r = base.clone();
-    r.goal.as_mut().unwrap().position = [2.0, 0.0, 0.5];
+    r.task.goal.as_mut().unwrap().position = [2.0, 0.0, 0.5];
     let resp = optimize(&r, &robot).unwrap();
     assert_eq!(resp.status, Status::Infeasible);
     assert!(resp.reason.unwrap().contains("out of reach"));
     // Goal buried in an obstacle (deeper than tolerance + the TCP's
     // distance to the nearest robot shape - clearance): diagnosed up front.
     let mut r = base.clone();
-    let goal = r.goal.as_ref().unwrap().position;
-    r.obstacles.push(sphere("over-goal", goal, 0.1));
+    let goal = r.task.goal.as_ref().unwrap().position;
+    r.task.obstacles.push(sphere("over-goal", goal, 0.1));
     let resp = optimize(&r, &robot).unwrap();
     assert_eq!(resp.status, Status::Infeasible);
     let reason = resp.reason.unwrap();
@@ -165,7 +168,7 @@ fn infeasible_cases_are_diagnosed_with_the_constraint() {
     );
     // A berry just around the goal point is not a proof of infeasibility
     // (the TCP is not a collision shape): never `optimal` with a violation.
-    if let ObstacleShape::Sphere(Sphere { radius, .. }) = &mut r.obstacles[0].shape {
+    if let ObstacleShape::Sphere(Sphere { radius, .. }) = &mut r.task.obstacles[0].shape {
         *radius = 0.02;
     }
     let resp = optimize(&r, &robot).unwrap();
@@ -223,7 +226,7 @@ fn annotation_prior_with_an_indefinite_joint_is_repaired_and_solved() {
 #[test]
 fn same_request_gives_the_same_bytes_except_solve_ms() {
     let (robot, mut req) = request(6, 3);
-    req.samples = 1;
+    req.task.samples = 1;
     let a = optimize(&req, &robot).unwrap();
     let b = optimize(&req, &robot).unwrap();
     assert_eq!(a.deterministic_json(), b.deterministic_json());
@@ -298,11 +301,11 @@ fn a_local_minimum_from_the_prior_mean_is_escaped_by_a_seeded_restart() {
     // typical problems 100..=500 are solved without restarts).
     let (robot, mut req) = request(400, 10);
     // The scenario is on the paper's timing (free ends).
-    req.boundary = dpmp::optim::Boundary::Free;
-    req.options.restarts = 0;
+    req.task.boundary = dpmp::optim::Boundary::Free;
+    req.task.options.restarts = 0;
     let stuck = optimize(&req, &robot).unwrap();
     assert_eq!(stuck.status, Status::MaxIterations);
-    req.options.restarts = 4;
+    req.task.options.restarts = 4;
     let found = optimize(&req, &robot).unwrap();
     assert_verified_optimal(&req, &robot, &found);
     // The report counts the work of every run and says what happened.
@@ -315,7 +318,7 @@ fn a_local_minimum_from_the_prior_mean_is_escaped_by_a_seeded_restart() {
     // The draws are seeded: the same request gives the same bytes.
     let again = optimize(&req, &robot).unwrap();
     assert_eq!(found.deterministic_json(), again.deterministic_json());
-    req.options.restarts = 33;
+    req.task.options.restarts = 33;
     assert_eq!(field_of(&req, &robot), "options.restarts");
 }
 
@@ -329,7 +332,7 @@ fn a_stalled_infeasible_run_raises_its_penalty_with_a_fresh_trust_region() {
     // where the old rules took 44 on the former capsule geometry; on the
     // mesh hulls it takes 33. The iteration count is deterministic.
     let (robot, mut req) = request(2, 10);
-    req.options.restarts = 0;
+    req.task.options.restarts = 0;
     let found = optimize(&req, &robot).unwrap();
     assert_verified_optimal(&req, &robot, &found);
     assert!(found.report.iterations <= 36, "{}", found.report.iterations);
@@ -343,8 +346,8 @@ fn assert_verified_optimal(req: &OptimizeRequest, robot: &Robot, found: &Optimiz
     let problem = req.validate(robot).unwrap();
     assert!(problem.is_feasible(&problem.evaluate(&found.weights)));
     let clearance = found.report.min_clearance_m.unwrap();
-    assert!(clearance >= req.clearance_m - 1e-9, "{clearance}");
-    let goal = req.goal.as_ref().unwrap();
+    assert!(clearance >= req.task.clearance_m - 1e-9, "{clearance}");
+    let goal = req.task.goal.as_ref().unwrap();
     assert!(found.report.goal_error_m.unwrap() <= goal.tolerance_m + 1e-9);
 }
 
@@ -365,12 +368,12 @@ fn the_buried_goal_certificate_is_sharp_and_holds_for_the_real_gripper() {
     // A sphere centred on the goal: the goal's depth is the radius, and
     // the certificate fires above tolerance + r - clearance.
     let (robot, base) = request(2, 0);
-    let goal = base.goal.as_ref().unwrap().clone();
+    let goal = base.task.goal.as_ref().unwrap().clone();
     let reach = tcp_to_nearest_shape(&robot).max(0.0);
-    let threshold = goal.tolerance_m + reach - base.clearance_m;
+    let threshold = goal.tolerance_m + reach - base.task.clearance_m;
     let with_sphere = |radius: f64| {
         let mut r = base.clone();
-        r.obstacles = vec![sphere("over-goal", goal.position, radius)];
+        r.task.obstacles = vec![sphere("over-goal", goal.position, radius)];
         r
     };
     let above = with_sphere(threshold.max(0.0) + 5e-4);
@@ -385,8 +388,8 @@ fn the_buried_goal_certificate_is_sharp_and_holds_for_the_real_gripper() {
     // The proof, checked on the robot: every TCP on the tolerance sphere
     // (the least deep points) leaves some robot shape closer than the
     // clearance to the obstacle.
-    let scene = dpmp::scene::Scene::new(above.obstacles.clone()).unwrap();
-    let start = base.start.clone().unwrap();
+    let scene = dpmp::scene::Scene::new(above.task.obstacles.clone()).unwrap();
+    let start = base.task.start.clone().unwrap();
     let options = dpmp::robot::IkOptions {
         tolerance_m: 1e-5,
         ..Default::default()
@@ -408,10 +411,10 @@ fn the_buried_goal_certificate_is_sharp_and_holds_for_the_real_gripper() {
             }
             let closest = scene.min_clearance(&robot, &robot.fk(&sol.q)).unwrap();
             assert!(
-                closest.distance < base.clearance_m,
+                closest.distance < base.task.clearance_m,
                 "TCP at {position:?}: clearance {} >= {}",
                 closest.distance,
-                base.clearance_m
+                base.task.clearance_m
             );
             checked += 1;
         }

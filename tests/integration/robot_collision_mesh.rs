@@ -347,12 +347,12 @@ fn a_berry_at_the_hands_flat_face_is_never_cleared_as_optimal() {
     // A berry whose surface is half the clearance away from the face.
     let radius = 0.012;
     let pose = robot.fk(&q_end).poses[hand];
-    let centre = (pose * Point3::from(centroid + n * (radius + 0.5 * req.clearance_m))).coords;
-    req.obstacles = vec![sphere("berry", centre.into(), radius)];
+    let centre = (pose * Point3::from(centroid + n * (radius + 0.5 * req.task.clearance_m))).coords;
+    req.task.obstacles = vec![sphere("berry", centre.into(), radius)];
     let problem = req.validate(&robot).unwrap();
     let report = problem.evaluate(&mean);
     let reported = report.min_clearance_m.unwrap();
-    assert!(reported < req.clearance_m, "{report:?}");
+    assert!(reported < req.task.clearance_m, "{report:?}");
     assert!(!problem.is_feasible(&report));
     let resp = optimize(&req, &robot).unwrap();
     if resp.status == Status::Optimal {
@@ -367,7 +367,7 @@ fn a_berry_at_the_hands_flat_face_is_never_cleared_as_optimal() {
             let p = robot.fk(&qk).poses[hand];
             let local = p.inverse() * Point3::from(centre);
             let exact = mesh.distance_to_point(&local.coords.into()) - radius;
-            assert!(exact >= req.clearance_m - 1e-6, "phase {k}: {exact}");
+            assert!(exact >= req.task.clearance_m - 1e-6, "phase {k}: {exact}");
         }
         assert_ne!(resp.weights, mean);
     }

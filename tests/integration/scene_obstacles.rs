@@ -349,9 +349,9 @@ fn extreme(rng: &mut rand_chacha::ChaCha8Rng) -> f64 {
 fn extreme_obstacles_are_refused_or_solved_never_a_panic() {
     use rand::{Rng, SeedableRng};
     let (robot, mut base) = crate::common::requests::typical(0, &Default::default());
-    base.promp.n_samples = 20;
-    base.options.max_iterations = 3;
-    base.options.restarts = 0;
+    base.task.promp.n_samples = 20;
+    base.task.options.max_iterations = 3;
+    base.task.options.restarts = 0;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(99);
     let (mut refused, mut solved) = (0, 0);
     for case in 0..60 {
@@ -378,7 +378,7 @@ fn extreme_obstacles_are_refused_or_solved_never_a_panic() {
         }
         shape["id"] = json!("x");
         let mut request = base.clone();
-        request.obstacles = vec![serde_json::from_value(shape.clone()).unwrap()];
+        request.task.obstacles = vec![serde_json::from_value(shape.clone()).unwrap()];
         let outcome = std::panic::catch_unwind(|| dpmp::optim::optimize(&request, &robot));
         match outcome {
             Err(_) => panic!("case {case}: panicked on {shape}"),

@@ -38,12 +38,13 @@ impl PenaltyModel {
         Ok(PenaltyModel {
             psi: phases.iter().map(|&z| basis.row_at(z)).collect(),
             dpsi: phases.iter().map(|&z| basis.derivative_row_at(z)).collect(),
-            scene: Scene::new(r.obstacles.clone())?,
+            scene: Scene::new(r.task.obstacles.clone())?,
             limits: case.robot.limits().to_vec(),
-            margin: r.joint_limit_margin_rad,
-            clearance: r.clearance_m + CLEARANCE_BUFFER_M,
-            duration: r.duration_s,
+            margin: r.task.joint_limit_margin_rad,
+            clearance: r.task.clearance_m + CLEARANCE_BUFFER_M,
+            duration: r.task.duration_s,
             goal: r
+                .task
                 .goal
                 .as_ref()
                 .map(|g| (Vector3::from(g.position), g.tolerance_m * INNER_FRACTION)),

@@ -78,7 +78,7 @@ impl Method for Rejection {
 
 /// Whether the final TCP of `w` is within the goal tolerance (true without a goal).
 fn reaches_goal(case: &Case, psi1: &DVector<f64>, w: &[f64]) -> bool {
-    let Some(goal) = &case.request.goal else {
+    let Some(goal) = &case.request.task.goal else {
         return true;
     };
     let nb = psi1.len();

@@ -20,9 +20,9 @@ pub struct StartConditioned {
 impl StartConditioned {
     /// Condition `case.problem.prior()` on the request's start.
     pub fn new(case: &Case) -> Result<StartConditioned> {
-        let basis = Basis::new(&case.request.promp)?;
+        let basis = Basis::new(&case.request.task.promp)?;
         let prior = case.problem.prior();
-        let Some(start) = &case.request.start else {
+        let Some(start) = &case.request.task.start else {
             return Ok(StartConditioned {
                 dist: prior.clone(),
                 basis,

@@ -5,6 +5,7 @@
 mod validate;
 
 pub use validate::check_prior;
+pub(crate) use validate::validate_spec;
 
 pub use super::report::TrajectoryFormat;
 use super::task::{Boundary, Goal, SolverOptions};
@@ -19,61 +20,129 @@ pub const MAX_OBSTACLES: usize = 1000;
 pub const MAX_EXTRA_SAMPLES: usize = 100;
 /// Largest accepted `promp.n_samples`.
 pub const MAX_PHASE_SAMPLES: usize = 2000;
-/// An optimise request (`POST /v1/optimize`, `dpmp optimize`).
+/// An optimise request (`POST /v1/optimize`, `dpmp optimize`): the prior
+/// beside the [`Task`]'s fields, one flat JSON object on the wire.
 #[derive(Clone, Debug, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(from = "WireRequest")]
 pub struct OptimizeRequest {
     /// The prior over the weights.
     pub prior: PriorSpec,
-    /// Basis settings (`n_basis` must match the prior).
-    #[serde(default)]
-    pub promp: PrompConfig,
-    /// Duration of the motion (s), for the velocity limits and timestamps.
-    #[serde(default = "default_duration")]
-    pub duration_s: f64,
-    /// Required configuration at t = 0.
-    #[serde(default)]
-    pub start: Option<Vec<f64>>,
-    /// Required TCP position at the end.
-    #[serde(default)]
-    pub goal: Option<Goal>,
-    /// The scene.
-    #[serde(default)]
-    pub obstacles: Vec<Obstacle>,
-    /// Required robot-obstacle clearance (m).
-    #[serde(default = "default_clearance")]
-    pub clearance_m: f64,
-    /// Margin kept inside each joint limit (rad).
-    #[serde(default)]
-    pub joint_limit_margin_rad: f64,
-    /// Number of extra feasible trajectories to return.
-    #[serde(default)]
-    pub samples: usize,
-    /// Solver knobs.
-    #[serde(default)]
-    pub options: SolverOptions,
-    /// How the answer writes the trajectory (`dpmp` or `ros2`).
-    #[serde(default, skip_serializing_if = "TrajectoryFormat::is_default")]
-    pub trajectory_format: TrajectoryFormat,
-    /// Velocity and acceleration at both ends: `rest` (zero; the default,
-    /// what a Franka needs) or `free`.
-    #[serde(default)]
-    pub boundary: Boundary,
-    /// Per-joint acceleration limits (rad/s²); default: the robot's
-    /// (`joint_limits.yaml` beside its URDF).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub acceleration_limits: Option<Vec<f64>>,
-    /// Per-joint jerk limits (rad/s³); default: the robot's.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub jerk_limits: Option<Vec<f64>>,
-    /// Factor in (0, 1] on every velocity limit (MoveIt's
-    /// `max_velocity_scaling_factor`).
-    #[serde(default = "one", skip_serializing_if = "is_one")]
-    pub velocity_scaling: f64,
-    /// Factor in (0, 1] on every acceleration limit (MoveIt's
-    /// `max_acceleration_scaling_factor`); jerk limits are not scaled.
-    #[serde(default = "one", skip_serializing_if = "is_one")]
-    pub acceleration_scaling: f64,
+    /// Everything else: scene, limits, start, goal, boundary, options.
+    #[serde(flatten)]
+    pub task: Task,
+}
+
+/// Declares [`Task`] and the private `WireRequest` (`prior` beside the
+/// same fields) from one field list: the wire request is derived, so every
+/// field error keeps its JSON path, and `deny_unknown_fields` holds (serde's
+/// `flatten` would lose both).
+macro_rules! task_and_wire_request {
+    (
+        $(#[$meta:meta])*
+        pub struct Task { $( $(#[$fmeta:meta])* pub $field:ident : $ty:ty, )* }
+    ) => {
+        $(#[$meta])*
+        pub struct Task { $( $(#[$fmeta])* pub $field: $ty, )* }
+
+        /// An [`OptimizeRequest`] as it is on the wire.
+        #[derive(Deserialize)]
+        #[serde(deny_unknown_fields)]
+        struct WireRequest {
+            prior: PriorSpec,
+            $( $(#[$fmeta])* $field: $ty, )*
+        }
+
+        impl From<WireRequest> for OptimizeRequest {
+            fn from(w: WireRequest) -> Self {
+                OptimizeRequest {
+                    prior: w.prior,
+                    task: Task { $( $field: w.$field, )* },
+                }
+            }
+        }
+    };
+}
+
+task_and_wire_request! {
+    /// What to plan, apart from the prior: the request without its `prior`
+    /// (`dpmp plan --task FILE`, and the fields of `/v1/plan` the optimiser
+    /// reads). Every field is optional in JSON.
+    #[derive(Clone, Debug, Serialize, Deserialize)]
+    #[serde(deny_unknown_fields)]
+    pub struct Task {
+        /// Basis settings (`n_basis` must match the prior).
+        #[serde(default)]
+        pub promp: PrompConfig,
+        /// Duration of the motion (s), for the velocity limits and timestamps.
+        #[serde(default = "default_duration")]
+        pub duration_s: f64,
+        /// Required configuration at t = 0.
+        #[serde(default)]
+        pub start: Option<Vec<f64>>,
+        /// Required TCP position at the end.
+        #[serde(default)]
+        pub goal: Option<Goal>,
+        /// The scene.
+        #[serde(default)]
+        pub obstacles: Vec<Obstacle>,
+        /// Required robot-obstacle clearance (m).
+        #[serde(default = "default_clearance")]
+        pub clearance_m: f64,
+        /// Margin kept inside each joint limit (rad).
+        #[serde(default)]
+        pub joint_limit_margin_rad: f64,
+        /// Number of extra feasible trajectories to return.
+        #[serde(default)]
+        pub samples: usize,
+        /// Solver knobs.
+        #[serde(default)]
+        pub options: SolverOptions,
+        /// How the answer writes the trajectory (`dpmp` or `ros2`).
+        #[serde(default, skip_serializing_if = "TrajectoryFormat::is_default")]
+        pub trajectory_format: TrajectoryFormat,
+        /// Velocity and acceleration at both ends: `rest` (zero; the default,
+        /// what a Franka needs) or `free`.
+        #[serde(default)]
+        pub boundary: Boundary,
+        /// Per-joint acceleration limits (rad/s²); default: the robot's
+        /// (`joint_limits.yaml` beside its URDF).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        pub acceleration_limits: Option<Vec<f64>>,
+        /// Per-joint jerk limits (rad/s³); default: the robot's.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        pub jerk_limits: Option<Vec<f64>>,
+        /// Factor in (0, 1] on every velocity limit (MoveIt's
+        /// `max_velocity_scaling_factor`).
+        #[serde(default = "one", skip_serializing_if = "is_one")]
+        pub velocity_scaling: f64,
+        /// Factor in (0, 1] on every acceleration limit (MoveIt's
+        /// `max_acceleration_scaling_factor`); jerk limits are not scaled.
+        #[serde(default = "one", skip_serializing_if = "is_one")]
+        pub acceleration_scaling: f64,
+    }
+}
+
+impl Default for Task {
+    /// The task of a JSON object without fields (`{}`).
+    fn default() -> Self {
+        Task {
+            promp: PrompConfig::default(),
+            duration_s: default_duration(),
+            start: None,
+            goal: None,
+            obstacles: Vec::new(),
+            clearance_m: default_clearance(),
+            joint_limit_margin_rad: 0.0,
+            samples: 0,
+            options: SolverOptions::default(),
+            trajectory_format: TrajectoryFormat::default(),
+            boundary: Boundary::default(),
+            acceleration_limits: None,
+            jerk_limits: None,
+            velocity_scaling: one(),
+            acceleration_scaling: one(),
+        }
+    }
 }
 
 fn one() -> f64 {

@@ -3,7 +3,9 @@
 //! prior repaired when it is not positive semi-definite (with a warning),
 //! the whitening, the phase rows and the limit set built.
 
-use super::{OptimizeRequest, PriorSpec, MAX_EXTRA_SAMPLES, MAX_OBSTACLES, MAX_PHASE_SAMPLES};
+use super::{
+    OptimizeRequest, PriorSpec, Task, MAX_EXTRA_SAMPLES, MAX_OBSTACLES, MAX_PHASE_SAMPLES,
+};
 use crate::error::{ensure_finite, ensure_in_range as check_range, ensure_positive};
 use crate::optim::problem::linear::LinearSet;
 use crate::optim::problem::phases::{PhaseRows, TimeWarp};
@@ -27,19 +29,65 @@ impl OptimizeRequest {
     /// `obstacles[1].radius`, `duration_s`, ...). An indefinite prior
     /// covariance is repaired and reported as a warning.
     pub fn validate(&self, robot: &Robot) -> Result<Problem> {
+        validate_spec(&self.prior, &self.task, robot)
+    }
+}
+
+/// [`OptimizeRequest::validate`] of the request `prior` + `task`.
+pub(crate) fn validate_spec(prior: &PriorSpec, task: &Task, robot: &Robot) -> Result<Problem> {
+    let n_basis = task.promp.n_basis;
+    task.problem(robot, None, |warnings| {
+        prior_distribution(prior, robot.dof(), n_basis, warnings)
+    })
+}
+
+impl Task {
+    /// [`OptimizeRequest::validate`] for a prior that is already a
+    /// distribution (the network's): the same checks on the same numbers,
+    /// errors naming `prior.mean` / `prior.cov[r][c]`, an indefinite
+    /// covariance repaired with a warning; no round trip through the wire
+    /// format. `basis` is reused when it is the task's ([`Task::basis`]);
+    /// another is ignored and the task's built.
+    pub fn validate(
+        &self,
+        robot: &Robot,
+        prior: &WeightDistribution,
+        basis: &Basis,
+    ) -> Result<Problem> {
+        self.problem(robot, Some(basis), |warnings| {
+            typed_prior(prior, robot.dof(), self.promp.n_basis, warnings)
+        })
+    }
+
+    /// The basis of the task's `promp` (errors name `promp`).
+    pub fn basis(&self) -> Result<Basis> {
+        Basis::new(&self.promp).map_err(|e| e.within("promp"))
+    }
+
+    /// Check every field, then the prior `prior` builds (it runs where the
+    /// request's prior has always been checked, so the first error of a
+    /// request with several is the same whichever way the prior came).
+    fn problem(
+        &self,
+        robot: &Robot,
+        basis: Option<&Basis>,
+        prior: impl FnOnce(&mut Vec<String>) -> Result<WeightDistribution>,
+    ) -> Result<Problem> {
         let mut warnings = Vec::new();
         self.check_fields(robot)?;
         let scene = Scene::new(self.obstacles.clone())?;
         let activation_m = validate_options(&self.options, self.clearance_m, robot)?;
         let linear = joint_bounds(robot, self.joint_limit_margin_rad, self)?;
-        let prior =
-            prior_distribution(&self.prior, robot.dof(), self.promp.n_basis, &mut warnings)?;
+        let prior = prior(&mut warnings)?;
         let lambda = match self.options.lambda {
             Some(l) => l,
             None => Whitening::default_lambda(&prior),
         };
         let whitening = Whitening::new(&prior, lambda)?;
-        let basis = Basis::new(&self.promp)?;
+        let basis = match basis {
+            Some(b) if b.config() == &self.promp => b.clone(),
+            _ => Basis::new(&self.promp)?,
+        };
         let warp = match self.boundary {
             Boundary::Rest => TimeWarp::Ramped,
             Boundary::Free => TimeWarp::Identity,
@@ -255,7 +303,7 @@ fn validate_options(o: &SolverOptions, clearance: f64, robot: &Robot) -> Result<
 }
 
 /// Joint limits shrunk by the margin, plus the equalities.
-fn joint_bounds(robot: &Robot, margin: f64, req: &OptimizeRequest) -> Result<LinearSet> {
+fn joint_bounds(robot: &Robot, margin: f64, req: &Task) -> Result<LinearSet> {
     let limits = robot.limits();
     for (j, l) in limits.iter().enumerate() {
         if l.lower + margin >= l.upper - margin {
@@ -309,13 +357,13 @@ fn rate_limits(
     })
 }
 
-/// The prior as a (repaired) weight distribution over `dof x n_basis` weights.
-/// Whether `spec` is a valid prior for `dof` joints of `n_basis` weights
-/// (the same check a request's `prior` gets; errors name `prior.…`).
-pub fn check_prior(spec: &PriorSpec, dof: usize, n_basis: usize) -> Result<()> {
-    prior_distribution(spec, dof, n_basis, &mut Vec::new()).map(|_| ())
+/// Whether `prior` is a valid prior for `dof` joints of `n_basis` weights
+/// (the check [`Task::validate`] gives it; errors name `prior.…`).
+pub fn check_prior(prior: &WeightDistribution, dof: usize, n_basis: usize) -> Result<()> {
+    typed_prior(prior, dof, n_basis, &mut Vec::new()).map(|_| ())
 }
 
+/// The prior as a (repaired) weight distribution over `dof x n_basis` weights.
 fn prior_distribution(
     spec: &PriorSpec,
     dof: usize,
@@ -379,6 +427,26 @@ fn full_prior(
     }
     let matrix = DMatrix::from_fn(n, n, |r, c| cov[r][c]);
     let dist = WeightDistribution::new(DVector::from_column_slice(mean), matrix, dof, n_basis)?;
+    Ok(repaired(dist, warnings))
+}
+
+/// A typed prior checked as [`full_prior`] checks the wire's (its size for
+/// `dof` joints of `n_basis` weights, finite, symmetric; then the repair),
+/// on the same numbers, so both ways give the same problem.
+fn typed_prior(
+    prior: &WeightDistribution,
+    dof: usize,
+    n_basis: usize,
+    warnings: &mut Vec<String>,
+) -> Result<WeightDistribution> {
+    let dist = WeightDistribution::new(prior.mean.clone(), prior.cov.clone(), dof, n_basis)
+        .map_err(|e| e.within("prior"))?;
+    Ok(repaired(dist, warnings))
+}
+
+/// `dist` with its covariance's eigenvalues clipped when it is not
+/// positive semi-definite (a warning says so).
+fn repaired(dist: WeightDistribution, warnings: &mut Vec<String>) -> WeightDistribution {
     let scale = dist.cov.symmetric_eigenvalues().amax();
     let (repaired, min_eig, changed) = repair_covariance(&dist.cov, REPAIR_FLOOR_RELATIVE * scale);
     if changed {
@@ -387,8 +455,8 @@ fn full_prior(
             REPAIR_FLOOR_RELATIVE * scale
         ));
     }
-    Ok(WeightDistribution {
+    WeightDistribution {
         cov: repaired,
         ..dist
-    })
+    }
 }

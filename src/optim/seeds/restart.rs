@@ -159,8 +159,8 @@ mod tests {
             ..Default::default()
         };
         let mut req = typical_request(&robot, 5, &settings).unwrap();
-        req.goal = None;
-        req.obstacles.clear();
+        req.task.goal = None;
+        req.task.obstacles.clear();
         let p = req.validate(&robot).unwrap();
         let ctl = SolveControl::default();
         let best = p.solve(&ctl).unwrap();

@@ -3,7 +3,7 @@
 //! service's limits and the solve all run as one job on the blocking pool
 //! under the concurrency limit and the deadline counted from arrival.
 
-use crate::optim::{optimize_with, OptimizeRequest, OptimizeResponse, SolveControl, Status};
+use crate::optim::{optimize_with, OptimizeRequest, OptimizeResponse, SolveControl, Status, Task};
 use crate::service::config::ServiceConfig;
 use crate::service::error::ApiError;
 use crate::service::extract::{media_type, parse_json, read_body, within_body_time, MediaType};
@@ -29,7 +29,7 @@ pub async fn optimize(
         .limiter()
         .run(deadline, move |job| -> Result<OptimizeResponse, ApiError> {
             let request: OptimizeRequest = parse_json(&bytes)?;
-            check_request_limits(&config, &request)?;
+            check_request_limits(&config, &request.task)?;
             Ok(optimize_with(&request, &robot, &solve_control(job))?)
         })
         .await??;
@@ -47,16 +47,13 @@ pub fn solve_control(job: &Job) -> SolveControl {
 
 /// The service's own request limits (on top of the optimiser's sanity
 /// limits): obstacle count, extra samples, trajectory samples → 422.
-pub fn check_request_limits(
-    config: &ServiceConfig,
-    request: &OptimizeRequest,
-) -> Result<(), ApiError> {
+pub fn check_request_limits(config: &ServiceConfig, task: &Task) -> Result<(), ApiError> {
     let checks = [
-        ("obstacles", request.obstacles.len(), config.max_obstacles),
-        ("samples", request.samples, config.max_samples),
+        ("obstacles", task.obstacles.len(), config.max_obstacles),
+        ("samples", task.samples, config.max_samples),
         (
             "promp.n_samples",
-            request.promp.n_samples,
+            task.promp.n_samples,
             config.max_trajectory_samples,
         ),
     ];

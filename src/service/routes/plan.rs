@@ -20,7 +20,7 @@
 //! with depth or a target position, `"target"`.
 
 use super::optimize::{check_request_limits, record_solve, solve_control};
-use crate::optim::OptimizeRequest;
+use crate::optim::Task;
 use crate::perception::depth::{DepthImage, DEFAULT_DEPTH_SCALE_M};
 use crate::perception::CameraModel;
 use crate::plan::{
@@ -128,7 +128,7 @@ pub async fn plan(
         .run(deadline, move |job| -> Result<PlanResponse, ApiError> {
             let image_field = received.image_field();
             let (input, _held) = received.into_input(&decoding)?;
-            check_request_limits(&decoding.config, &input.request)?;
+            check_request_limits(&decoding.config, &input.task)?;
             let model = model.ok_or_else(ApiError::model_unavailable)?;
             if let TargetInput::Depth(..) = input.target {
                 let (w, h) = (input.image.width(), input.image.height());
@@ -257,8 +257,8 @@ fn malformed_multipart(message: &str) -> ApiError {
     )
 }
 
-/// Validate the non-image fields, build the optimiser request with a
-/// placeholder prior (replaced by the prediction), then decode the image
+/// Validate the non-image fields, parse the rest as the optimiser's
+/// [`Task`] (the prior is the prediction), then decode the image
 /// and the depth within the decode budget.
 fn finish_input(
     decoding: &Decoding,
@@ -288,11 +288,7 @@ fn finish_input(
     let goal_standoff_m = optional_number(&mut fields, STANDOFF_FIELD)?;
     let approach = goal_approach(&mut fields)?;
     let camera = take_camera(&mut fields)?;
-    fields.insert(
-        "prior".to_string(),
-        serde_json::json!({"mean": [], "cov": []}),
-    );
-    let request: OptimizeRequest = from_value(Value::Object(fields))?;
+    let task: Task = from_value(Value::Object(fields))?;
     let (image_field, image_bytes) = &encoded.image;
     let max_pixels = decoding.config.max_image_pixels;
     let (image, image_held) = decode_image_within(
@@ -332,7 +328,7 @@ fn finish_input(
         mask_applied,
         target,
         goal_standoff_m,
-        request,
+        task,
         approach,
         camera,
     };
