@@ -66,7 +66,7 @@ fn main() {
 /// The plan pipeline on generated plants, each answer hashed.
 fn plan_digests(root: &Path, robot: Arc<Robot>) {
     use dpmp::net::Model;
-    use dpmp::plan::{predict_and_optimize, PlanInput, TargetInput};
+    use dpmp::plan::{predict_and_optimize, PlanFields, PlanParts, PlanRequest};
     use dpmp::synth::generate::Generator;
     use dpmp::synth::settings::SynthSettings;
     let models = ["models/rgb-only", "models/default"];
@@ -81,25 +81,28 @@ fn plan_digests(root: &Path, robot: Arc<Robot>) {
         for k in 0..10 {
             let out = generator.config(21, k).expect("plant");
             let record = out.records[0].clone();
-            let target = match (&out.depths[0], depth_model || k % 2 == 0) {
-                (Some(depth), true) => TargetInput::Depth(depth.clone(), "depth".into()),
-                _ => TargetInput::None,
+            let depth = match (&out.depths[0], depth_model || k % 2 == 0) {
+                (Some(depth), true) => Some(depth.clone()),
+                _ => None,
             };
             let task = dpmp::optim::Task {
                 obstacles: record.scene.obstacles,
                 clearance_m: 0.02,
                 ..Default::default()
             };
-            let input = PlanInput {
+            let parts = PlanParts {
                 image: image::DynamicImage::ImageRgb8(out.images[0].clone()),
                 target_box: record.bbox,
                 mask_applied: true,
-                target,
+                depth,
+                depth_scale_m: None,
+                target_position: None,
                 goal_standoff_m: None,
-                task,
                 approach: None,
                 camera: None,
+                task,
             };
+            let input = PlanRequest::new(parts, &PlanFields::json()).expect("plan request");
             let answer = match predict_and_optimize(&model, &robot, input, &Default::default()) {
                 Ok(r) => digest(serde_json::to_value(&r).expect("plan json")),
                 Err(e) => digest(serde_json::json!({ "error": e.to_string() })),

@@ -95,7 +95,7 @@ const PLAN_PLANTS: usize = 10;
 /// JPEG and its 16-bit depth PNG (decode, back-projection, the goal it
 /// implies).
 fn plan(c: &mut Criterion) {
-    use dpmp::plan::{predict_and_optimize, PlanInput, TargetInput};
+    use dpmp::plan::{predict_and_optimize, PlanFields, PlanParts, PlanRequest};
     use dpmp::robot::Robot;
     use dpmp::synth::generate::Generator;
     use dpmp::synth::settings::SynthSettings;
@@ -132,23 +132,22 @@ fn plan(c: &mut Criterion) {
     let run = |model: &Arc<Model>, with_depth: bool| {
         for (jpeg, depth, bbox, task) in &plants {
             let image = image::load_from_memory(jpeg).expect("decode");
-            let target = if with_depth {
-                let d =
-                    dpmp::perception::DepthImage::decode_png(depth, 0.001, "depth").expect("depth");
-                TargetInput::Depth(d, "depth".into())
-            } else {
-                TargetInput::None
-            };
-            let input = PlanInput {
+            let depth = with_depth.then(|| {
+                dpmp::perception::DepthImage::decode_png(depth, 0.001, "depth").expect("depth")
+            });
+            let parts = PlanParts {
                 image,
                 target_box: *bbox,
                 mask_applied: true,
-                target,
+                depth,
+                depth_scale_m: None,
+                target_position: None,
                 goal_standoff_m: None,
-                task: task.clone(),
                 approach: None,
                 camera: None,
+                task: task.clone(),
             };
+            let input = PlanRequest::new(parts, &PlanFields::json()).expect("plan request");
             black_box(
                 predict_and_optimize(model, &robot, input, &Default::default()).expect("plan"),
             );

@@ -22,6 +22,10 @@
 //!
 //! ## Modules, in data-flow order
 //!
+//! **The live path** — what a request runs through (`/v1/plan`,
+//! `/v1/optimize`, `dpmp plan`); none of it imports an offline tool
+//! (`tests/integration/module_graph.rs` checks):
+//!
 //! - [`promp`] — basis, fitting, weight distributions, conditioning, the
 //!   paper's covariance codec and annotation import.
 //! - [`geometry`] — the `[x, y, z, w]` quaternion convention and segment
@@ -29,23 +33,30 @@
 //! - [`robot`] — URDF loading, kinematics, Jacobians, inverse kinematics,
 //!   link collision shapes.
 //! - [`scene`] — obstacles and signed-distance queries against the robot.
-//! - [`optim`] — the Mahalanobis-closest trajectory optimiser.
 //! - [`perception`] — the gripper camera model, aligned depth images, and
 //!   the 3-D target position behind a box.
-//! - [`plan`] — the image (+ depth) → prior → goal → optimiser pipeline
-//!   behind `/v1/plan` and `dpmp plan`.
+//! - [`net`] — the dPMP network in candle and its inference API.
+//! - [`plan`] — one validated [`plan::PlanRequest`] and the image (+ depth)
+//!   → prior → goal → optimiser pipeline behind `/v1/plan` and `dpmp plan`.
+//! - [`optim`] — the Mahalanobis-closest trajectory optimiser: a typed prior
+//!   beside an [`optim::Task`].
+//! - [`service`] — the axum HTTP service, a shell over [`plan`] and [`optim`].
+//!
+//! **The offline tools** — data, training, benchmarks, pictures:
+//!
 //! - [`demos`] — recorded demonstrations in (CSV/JSON joint recordings →
 //!   phase-normalised weight fits → a prior).
 //! - [`synth`] — synthetic plant scenes, camera renderer, demonstrations.
-//! - [`net`] and [`train`] — the dPMP network in candle and its training.
-//! - [`service`] — the axum HTTP service.
+//! - [`train`] — training and evaluation of the network.
 //! - [`bench`] — the offline benchmark runner.
 //! - [`plot`] — shared plotting helpers (plotters).
 //! - [`fixtures`] — generated typical optimiser requests for benchmarks,
 //!   tests and examples.
-//! - [`fsio`] — whole-or-nothing file writes, shared by every writer.
-//! - [`strict_json`] — duplicate object keys refused in every JSON input.
-//! - [`progress`] — progress bars on stderr for long work.
+//!
+//! **Shared plumbing:** [`cli`] (the `dpmp` command line, a shell over
+//! both), [`error`], [`fsio`] (whole-or-nothing file writes), [`strict_json`]
+//! (duplicate object keys refused in every JSON input), [`progress`]
+//! (progress bars on stderr for long work).
 //!
 //! ## Conventions
 //!

@@ -3,10 +3,8 @@
 //! optimised trajectory per joint.
 
 use crate::optim::{optimize, OptimizeRequest, OptimizeResponse, Problem};
-use crate::plot::{format_of, joint_panels, JointSeries};
+use crate::plot::{format_of, prior_and_answer, PriorBand};
 use crate::{Error, Result};
-use nalgebra::{DMatrix, DVector};
-use plotters::style::RGBColor;
 use std::path::{Path, PathBuf};
 
 /// Arguments of `dpmp optimize`.
@@ -78,45 +76,21 @@ fn in_file(e: Error, path: &Path) -> Error {
 pub fn plot_response(path: &Path, problem: &Problem, response: &OptimizeResponse) -> Result<()> {
     let basis = problem.basis();
     let prior = problem.prior();
-    let times: Vec<f64> = basis
-        .phases()
-        .iter()
-        .map(|z| z * problem.duration())
-        .collect();
-    let w = DVector::from_column_slice(&response.weights);
-    let nb = prior.n_basis;
-    let wm = DMatrix::from_fn(nb, prior.n_joints, |i, j| w[j * nb + i]);
-    let series = [
-        JointSeries::band(
-            "prior mean ± 2σ".into(),
-            RGBColor(70, 110, 200),
-            prior.trajectory_mean(basis),
-            prior.trajectory_std(basis, 0.0),
-            2.0,
-        ),
-        JointSeries::line(
-            format!("optimised ({})", response.status.as_str()),
-            RGBColor(220, 60, 40),
-            basis.matrix() * wm,
-            2,
-        ),
-    ];
-    let limits: Vec<(f64, f64)> = problem
-        .robot()
-        .limits()
-        .iter()
-        .map(|l| (l.lower, l.upper))
-        .collect();
-    joint_panels(
+    let band = PriorBand {
+        mean: prior.trajectory_mean(basis),
+        std: prior.trajectory_std(basis, 0.0),
+    };
+    let title = format!(
+        "dPMP optimise: Mahalanobis {:.3}, status {}",
+        response.mahalanobis,
+        response.status.as_str()
+    );
+    prior_and_answer(
         path,
-        &format!(
-            "dPMP optimise: Mahalanobis {:.3}, status {}",
-            response.mahalanobis,
-            response.status.as_str()
-        ),
-        &times,
-        &series,
-        problem.robot().joint_names(),
-        Some(&limits),
+        &title,
+        (basis, problem.duration()),
+        band,
+        response,
+        problem.robot(),
     )
 }

@@ -1,15 +1,23 @@
 //! `dpmp plan`: an image (+ aligned depth) and a target box → the
 //! network's prior → (pre-grasp goal) → the optimiser; prints the
-//! `/v1/plan` response JSON. A shell over [`crate::plan`].
+//! `/v1/plan` response JSON. A shell over [`crate::plan`]: the flags (or a
+//! dataset record) become the same [`PlanRequest`] the HTTP route builds,
+//! and every field of `/v1/plan` has a flag or a place in `--task FILE`.
 
 use crate::net::Model;
-use crate::optim::Task;
-use crate::perception::depth::{DepthImage, DEFAULT_DEPTH_SCALE_M};
-use crate::plan::{predict_and_optimize, GoalApproach, PlanInput, TargetInput};
+use crate::optim::task::DEFAULT_GOAL_TOLERANCE_M;
+use crate::optim::{Goal, GoalApproach, Task};
+use crate::perception::depth::{check_scale, DepthImage, DEFAULT_DEPTH_SCALE_M};
+use crate::perception::CameraModel;
+use crate::plan::{predict_and_optimize, PlanFields, PlanParts, PlanRequest, PlanResponse};
+use crate::plot::{format_of, prior_and_answer, PriorBand};
 use crate::robot::Robot;
+use crate::scene::SceneFile;
+use crate::train::plan_eval::{find_record, record_fields, record_plan_input};
 use crate::{Error, Result};
 use clap::Args;
-use std::path::PathBuf;
+use nalgebra::DMatrix;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 /// Arguments of `dpmp plan`.
@@ -21,7 +29,7 @@ pub struct PlanArgs {
     /// instead of --image, --box and the rest.
     #[arg(
         long,
-        conflicts_with_all = ["image", "target_box", "mask_applied", "depth", "target_position", "scene", "camera", "duration"]
+        conflicts_with_all = ["image", "target_box", "mask_applied", "depth", "depth_scale", "target_position", "scene", "camera", "duration", "task", "start", "goal"]
     )]
     pub record: Option<PathBuf>,
     /// Camera image (PNG or JPEG, any size).
@@ -44,9 +52,9 @@ pub struct PlanArgs {
     /// berry's 3-D position becomes the pre-grasp goal.
     #[arg(long)]
     pub depth: Option<PathBuf>,
-    /// Metres per depth unit (0.001: millimetres).
-    #[arg(long, default_value_t = DEFAULT_DEPTH_SCALE_M)]
-    pub depth_scale: f64,
+    /// Metres per depth unit of --depth [default: 0.001, millimetres].
+    #[arg(long)]
+    pub depth_scale: Option<f64>,
     /// The berry centre x,y,z (m, base frame) from your own perception,
     /// instead of --depth.
     #[arg(
@@ -66,9 +74,36 @@ pub struct PlanArgs {
     /// Allowed angle to --approach-axis (rad).
     #[arg(long, default_value_t = crate::optim::task::DEFAULT_APPROACH_TOLERANCE_RAD)]
     pub approach_tolerance: f64,
+    /// The optimiser's fields of a `/v1/plan` request as a JSON file
+    /// (`obstacles`, `clearance_m`, `duration_s`, `start`, `goal`,
+    /// `options`, `trajectory_format`, ...: the `/v1/optimize` request
+    /// without `prior`); the flags below override the fields they name.
+    #[arg(long)]
+    pub task: Option<PathBuf>,
     /// Scene file `{"obstacles": [...]}` (request schema).
     #[arg(long)]
     pub scene: Option<PathBuf>,
+    /// Start configuration q1,...,q7 (rad) [default: free, the prior's].
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
+    pub start: Option<Vec<f64>>,
+    /// A goal TCP position x,y,z (m, base frame), without a 3-D target.
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
+    pub goal: Option<Vec<f64>>,
+    /// Tolerance of --goal (m) [default: 0.01].
+    #[arg(long)]
+    pub goal_tolerance: Option<f64>,
+    /// Restarts from prior draws when the run from the prior mean fails
+    /// (0..=32) [default: 4].
+    #[arg(long)]
+    pub restarts: Option<usize>,
+    /// How the answer writes the trajectory: `dpmp` or `ros2`
+    /// (trajectory_msgs/JointTrajectory) [default: dpmp].
+    #[arg(long)]
+    pub trajectory_format: Option<String>,
+    /// Draw the prior ±2σ band, its mean and the planned trajectory per
+    /// joint into this `.png` or `.svg` file.
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
     /// Trained model folder (model.safetensors + config.json; also from
     /// DPMP_MODEL_DIR) [default: the shipped model, carried by the binary].
     #[arg(long, env = super::serve::MODEL_DIR_ENV)]
@@ -76,12 +111,12 @@ pub struct PlanArgs {
     /// The robot (must be the one the model was trained for).
     #[command(flatten)]
     pub robot: super::RobotArgs,
-    /// Required clearance to every obstacle (m).
-    #[arg(long, default_value_t = 0.02)]
-    pub clearance: f64,
-    /// Trajectory duration (s).
-    #[arg(long, default_value_t = 4.0)]
-    pub duration: f64,
+    /// Required clearance to every obstacle (m) [default: 0.02].
+    #[arg(long)]
+    pub clearance: Option<f64>,
+    /// Trajectory duration (s) [default: 4].
+    #[arg(long)]
+    pub duration: Option<f64>,
     /// Exit 3 (after printing the answer) when its status is not `optimal`.
     #[arg(long)]
     pub require_optimal: bool,
@@ -94,19 +129,20 @@ pub struct PlanArgs {
 
 /// Run `dpmp plan`.
 pub fn run(args: PlanArgs) -> Result<()> {
-    let (input, model, robot) = match &args.record {
-        Some(record) => {
-            let (model, robot) = load_model_and_robot(&args)?;
-            (record_input(&args, record)?, model, robot)
-        }
-        None => {
-            // The box, the image and the scene are checked before the model loads.
-            let flags = read_flags(&args)?;
-            let (model, robot) = load_model_and_robot(&args)?;
-            (flag_input(&args, &model, flags)?, model, robot)
-        }
+    if let Some(plot) = &args.plot {
+        format_of(plot, "--plot")?;
+    }
+    // Every input is read and checked before the model loads.
+    let request = match &args.record {
+        Some(record) => record_request(&args, record)?,
+        None => PlanRequest::new(flag_parts(&args)?, &flag_fields(&args))?,
     };
-    let response = predict_and_optimize(&model, &robot, input, &Default::default())?;
+    let (model, robot) = load_model_and_robot(&args)?;
+    let task = request.task().clone();
+    let response = predict_and_optimize(&model, &robot, request, &Default::default())?;
+    if let Some(plot) = &args.plot {
+        plot_plan(plot, &task, &robot, &response)?;
+    }
     crate::cli::print_json(&response)?;
     crate::cli::require_optimal(args.require_optimal, response.result.status)
 }
@@ -127,33 +163,26 @@ fn load_model_and_robot(args: &PlanArgs) -> Result<(Arc<Model>, Arc<Robot>)> {
     Ok((model, robot))
 }
 
-/// `--record`: the dataset target's own inputs, with `--clearance`, the
-/// goal flags and the approach.
-fn record_input(args: &PlanArgs, record: &std::path::Path) -> Result<PlanInput> {
-    let (dir, manifest, entry) = crate::train::plan_eval::find_record(record)?;
-    let (mut input, _) = crate::train::plan_eval::record_plan_input(
+/// `--record`: the dataset target's own inputs, with the optimiser flags,
+/// the goal standoff and the approach.
+fn record_request(args: &PlanArgs, record: &Path) -> Result<PlanRequest> {
+    let (dir, manifest, entry) = find_record(record)?;
+    let clearance = args.clearance.unwrap_or(Task::default().clearance_m);
+    let (mut parts, _) = record_plan_input(
         &dir,
         &entry,
         manifest.depth_scale_m(),
         manifest.camera_model(),
-        args.clearance,
+        clearance,
     )?;
-    crate::plan::check_standoff(args.goal_standoff, &input.target, "--goal-standoff")?;
-    input.goal_standoff_m = args.goal_standoff;
-    input.approach = approach(args)?;
-    Ok(input)
+    apply_task_flags(args, &mut parts.task)?;
+    parts.goal_standoff_m = args.goal_standoff;
+    parts.approach = approach(args)?;
+    PlanRequest::new(parts, &record_fields(&entry))
 }
 
-/// What the flags give before the model is loaded: the image, the box
-/// (checked against it) and the request with the scene.
-struct Flags {
-    image: image::DynamicImage,
-    target_box: [f64; 4],
-    task: Task,
-}
-
-/// `--image`, `--box`, `--scene`, `--duration` and `--clearance`.
-fn read_flags(args: &PlanArgs) -> Result<Flags> {
+/// The inputs the flags give (--image, --box, --depth, --task, ...).
+fn flag_parts(args: &PlanArgs) -> Result<PlanParts> {
     let image_path = args
         .image
         .as_ref()
@@ -165,91 +194,147 @@ fn read_flags(args: &PlanArgs) -> Result<Flags> {
         .map_err(|_| Error::invalid("--box", "expected four numbers x1,y1,x2,y2"))?;
     let image = image::open(image_path)
         .map_err(|e| Error::file(image_path, format!("cannot read image: {e}")))?;
-    crate::plan::check_target_box(&target_box, image.width(), image.height(), "--box")?;
-    let obstacles = match &args.scene {
-        Some(path) => crate::cli::read_json::<crate::scene::SceneFile>(path)?.obstacles,
-        None => Vec::new(),
+    let mut task = match &args.task {
+        Some(path) => crate::fsio::read_json::<Task>(path)?,
+        None => Task::default(),
     };
-    let task = Task {
-        duration_s: args.duration,
-        clearance_m: args.clearance,
-        obstacles,
-        ..Task::default()
+    apply_task_flags(args, &mut task)?;
+    let camera = match &args.camera {
+        Some(path) => Some(crate::fsio::read_json::<CameraModel>(path)?),
+        None => None,
     };
-    Ok(Flags {
+    Ok(PlanParts {
         image,
         target_box,
+        mask_applied: args.mask_applied,
+        depth: read_depth(args)?,
+        depth_scale_m: args.depth_scale,
+        target_position: numbers::<3>(&args.target_position, "--target-position", "x,y,z")?,
+        goal_standoff_m: args.goal_standoff,
+        approach: approach(args)?,
+        camera,
         task,
     })
 }
 
-/// The plan input of the flags (--image, --box, --depth, --camera, ...).
-fn flag_input(args: &PlanArgs, model: &Model, flags: Flags) -> Result<PlanInput> {
-    let Flags {
-        image,
-        target_box,
-        task,
-    } = flags;
-    let camera = match &args.camera {
-        Some(path) => {
-            let camera: crate::perception::CameraModel = crate::fsio::read_json(path)?;
-            camera
-                .validate("camera")
-                .map_err(|e| Error::file(path, e.to_string()))?;
-            Some(camera)
-        }
-        None => None,
+/// The flags' names in errors, the images with their files.
+fn flag_fields(args: &PlanArgs) -> PlanFields {
+    let with_file = |flag: &str, path: &Option<PathBuf>| match path {
+        Some(p) => format!("{flag} {}", p.display()),
+        None => flag.to_string(),
     };
-    if args.depth.is_some() {
-        let (w, h) = (image.width(), image.height());
-        crate::plan::check_camera_size(model, camera.as_ref(), w, h, "--image")?;
+    PlanFields {
+        image: with_file("--image", &args.image),
+        depth: with_file("--depth", &args.depth),
+        ..PlanFields::flags()
     }
-    let target = target_input(args, &image)?;
-    crate::plan::check_standoff(args.goal_standoff, &target, "--goal-standoff")?;
-    Ok(PlanInput {
-        image,
-        target_box,
-        mask_applied: args.mask_applied,
-        target,
-        goal_standoff_m: args.goal_standoff,
-        task,
-        approach: approach(args)?,
-        camera,
-    })
+}
+
+/// The optimiser flags over `task`: each one given replaces its field.
+fn apply_task_flags(args: &PlanArgs, task: &mut Task) -> Result<()> {
+    if let Some(path) = &args.scene {
+        task.obstacles = crate::cli::read_json::<SceneFile>(path)?.obstacles;
+    }
+    if let Some(clearance) = args.clearance {
+        task.clearance_m = clearance;
+    }
+    if let Some(duration) = args.duration {
+        task.duration_s = duration;
+    }
+    if let Some(start) = &args.start {
+        task.start = Some(start.clone());
+    }
+    if let Some(restarts) = args.restarts {
+        task.options.restarts = restarts;
+    }
+    if let Some(format) = &args.trajectory_format {
+        task.trajectory_format =
+            serde_json::from_value(serde_json::json!(format)).map_err(|_| {
+                Error::invalid(
+                    "--trajectory-format",
+                    format!("expected dpmp or ros2, got {format:?}"),
+                )
+            })?;
+    }
+    if let Some(position) = numbers::<3>(&args.goal, "--goal", "x,y,z")? {
+        let tolerance = args.goal_tolerance.unwrap_or(DEFAULT_GOAL_TOLERANCE_M);
+        task.goal = Some(Goal::at(position, tolerance));
+    } else if let Some(tolerance) = args.goal_tolerance {
+        let goal = task.goal.as_mut().ok_or_else(|| {
+            Error::invalid(
+                "--goal-tolerance",
+                "applies only with a goal (--goal or the --task file's)",
+            )
+        })?;
+        goal.tolerance_m = tolerance;
+    }
+    Ok(())
+}
+
+/// `N` comma-separated numbers of flag `flag` (written `shape` in errors).
+fn numbers<const N: usize>(
+    values: &Option<Vec<f64>>,
+    flag: &str,
+    shape: &str,
+) -> Result<Option<[f64; N]>> {
+    values
+        .as_ref()
+        .map(|v| {
+            v.clone()
+                .try_into()
+                .map_err(|_| Error::invalid(flag, format!("expected {N} numbers {shape}")))
+        })
+        .transpose()
 }
 
 /// `--approach-axis` and `--approach-tolerance`, if an axis is given.
 fn approach(args: &PlanArgs) -> Result<Option<GoalApproach>> {
-    let Some(axis) = &args.approach_axis else {
-        return Ok(None);
-    };
-    let approach_axis: [f64; 3] = axis
-        .clone()
-        .try_into()
-        .map_err(|_| Error::invalid("--approach-axis", "expected three numbers x,y,z"))?;
-    Ok(Some(GoalApproach {
-        approach_axis,
-        approach_tolerance_rad: args.approach_tolerance,
-    }))
+    Ok(
+        numbers::<3>(&args.approach_axis, "--approach-axis", "x,y,z")?.map(|approach_axis| {
+            GoalApproach {
+                approach_axis,
+                approach_tolerance_rad: args.approach_tolerance,
+            }
+        }),
+    )
 }
 
-/// The 3-D target of `--depth` or `--target-position`.
-fn target_input(args: &PlanArgs, image: &image::DynamicImage) -> Result<TargetInput> {
-    if let Some(p) = &args.target_position {
-        let p: [f64; 3] = p
-            .clone()
-            .try_into()
-            .map_err(|_| Error::invalid("--target-position", "expected three numbers x,y,z"))?;
-        return Ok(TargetInput::Position(p));
-    }
+/// `--depth`, decoded with `--depth-scale` (errors name the file).
+fn read_depth(args: &PlanArgs) -> Result<Option<DepthImage>> {
     let Some(path) = &args.depth else {
-        return Ok(TargetInput::None);
+        return Ok(None);
     };
+    let scale = args.depth_scale.unwrap_or(DEFAULT_DEPTH_SCALE_M);
+    check_scale(scale, "--depth-scale")?;
     let bytes = std::fs::read(path).map_err(|e| Error::file(path, e.to_string()))?;
-    let depth = DepthImage::decode_png(&bytes, args.depth_scale, "--depth")
-        .map_err(|e| Error::file(path, e.to_string()))?;
-    depth
-        .check_aligned(image.width(), image.height(), "--depth")
-        .map_err(|e| Error::file(path, e.to_string()))?;
-    Ok(TargetInput::Depth(depth, "--depth".into()))
+    DepthImage::decode_png(&bytes, scale, "--depth")
+        .map(Some)
+        .map_err(|e| Error::file(path, e.to_string()))
+}
+
+/// `--plot`: the prior band the network predicted and the planned answer.
+fn plot_plan(path: &Path, task: &Task, robot: &Robot, response: &PlanResponse) -> Result<()> {
+    let rows = |r: &[Vec<f64>]| {
+        let dof = r.first().map_or(0, Vec::len);
+        DMatrix::from_fn(r.len(), dof, |t, j| r[t][j])
+    };
+    let band = PriorBand {
+        mean: rows(&response.prior.mean),
+        std: rows(&response.prior.std),
+    };
+    let title = format!(
+        "dPMP plan ({}): Mahalanobis {:.3}, status {}",
+        response.model,
+        response.result.mahalanobis,
+        response.result.status.as_str()
+    );
+    let basis = task.basis()?;
+    prior_and_answer(
+        path,
+        &title,
+        (&basis, task.duration_s),
+        band,
+        &response.result,
+        robot,
+    )
 }

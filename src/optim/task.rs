@@ -64,6 +64,39 @@ impl Goal {
     }
 }
 
+impl Goal {
+    /// This goal approached along `approach` (none: as it is).
+    pub fn with_approach(mut self, approach: Option<&GoalApproach>) -> Goal {
+        if let Some(a) = approach {
+            self.approach_axis = Some(a.approach_axis);
+            self.approach_tolerance_rad = a.approach_tolerance_rad;
+        }
+        self
+    }
+
+    /// The goal's approach direction, if it has one.
+    pub fn approach(&self) -> Option<GoalApproach> {
+        self.approach_axis.map(|approach_axis| GoalApproach {
+            approach_axis,
+            approach_tolerance_rad: self.approach_tolerance_rad,
+        })
+    }
+}
+
+/// The direction a [`Goal`] is approached from: the gripper's z axis at the
+/// end within `approach_tolerance_rad` of `approach_axis` (a goal's own two
+/// fields). `/v1/plan` and `dpmp plan` take it alone when the goal's
+/// position is derived from the 3-D target (a `goal` without `position`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GoalApproach {
+    /// Unit vector in the base frame.
+    pub approach_axis: [f64; 3],
+    /// Allowed angle (rad).
+    #[serde(default = "default_approach_tolerance")]
+    pub approach_tolerance_rad: f64,
+}
+
 /// Default `goal.approach_tolerance_rad`: 10°.
 pub const DEFAULT_APPROACH_TOLERANCE_RAD: f64 = std::f64::consts::PI / 18.0;
 
@@ -74,8 +107,11 @@ fn is_default_approach_tolerance(v: &f64) -> bool {
     *v == DEFAULT_APPROACH_TOLERANCE_RAD
 }
 
+/// Default `goal.tolerance_m` (m).
+pub const DEFAULT_GOAL_TOLERANCE_M: f64 = 0.01;
+
 fn default_tolerance() -> f64 {
-    0.01
+    DEFAULT_GOAL_TOLERANCE_M
 }
 
 /// Solver knobs; every field is optional in JSON.

@@ -138,7 +138,9 @@ impl DepthImage {
     }
 }
 
-fn check_scale(scale_m: f64, field: &str) -> Result<()> {
+/// A depth scale (m per unit) must be finite, > 0 and <= 1; errors name
+/// `field`.
+pub fn check_scale(scale_m: f64, field: &str) -> Result<()> {
     if scale_m.is_finite() && scale_m > 0.0 && scale_m <= 1.0 {
         Ok(())
     } else {

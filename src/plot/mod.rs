@@ -1,13 +1,15 @@
 //! Shared plotting helpers (plotters): per-joint trajectory panels with
 //! uncertainty bands (the paper's figures), used by `dpmp prior plot`,
-//! `dpmp optimize --plot` and the reports.
+//! `dpmp optimize --plot`, `dpmp plan --plot` and the reports.
 //!
 //! Text is drawn with an embedded DejaVu Sans (see `DejaVuSans.LICENSE`), so
 //! plots need no system fonts. Output format follows the file extension
 //! (`.png` or `.svg`); files are written to a temporary name and renamed.
 
+pub mod answer;
 mod joints;
 
+pub use answer::{prior_and_answer, PriorBand};
 pub use joints::{joint_panels, JointSeries};
 
 use crate::{Error, Result};

@@ -17,7 +17,7 @@
 
 use crate::net::Model;
 use crate::optim::{Status, Task};
-use crate::plan::{predict_and_optimize, PlanInput, TargetInput};
+use crate::plan::{predict_and_optimize, PlanFields, PlanParts, PlanRequest};
 use crate::robot::Robot;
 use crate::synth::dataset::{self, Manifest, TargetEntry, TargetRecord};
 use crate::{Error, Result};
@@ -114,13 +114,10 @@ pub fn record_plan_input(
     depth_scale_m: f64,
     camera: crate::perception::CameraModel,
     clearance_m: f64,
-) -> Result<(PlanInput, TargetRecord)> {
+) -> Result<(PlanParts, TargetRecord)> {
     let record = dataset::load_record(dir, entry)?;
     let image = image::DynamicImage::ImageRgb8(dataset::load_image(dir, entry)?);
-    let target = match dataset::load_depth(dir, entry, depth_scale_m)? {
-        Some(depth) => TargetInput::Depth(depth, format!("depth of {}", entry.id)),
-        None => TargetInput::None,
-    };
+    let depth = dataset::load_depth(dir, entry, depth_scale_m)?;
     let task = Task {
         duration_s: record.duration_s,
         start: Some(record.start.clone()),
@@ -128,17 +125,28 @@ pub fn record_plan_input(
         clearance_m,
         ..Task::default()
     };
-    let input = PlanInput {
+    let parts = PlanParts {
         image,
         target_box: record.bbox,
         mask_applied: entry.mask_applied,
-        target,
+        depth,
+        depth_scale_m: None,
+        target_position: None,
         goal_standoff_m: None,
-        task,
         approach: None,
         camera: Some(camera),
+        task,
     };
-    Ok((input, record))
+    Ok((parts, record))
+}
+
+/// The names errors give a record's inputs: the flags', the depth by its
+/// target.
+pub fn record_fields(entry: &TargetEntry) -> PlanFields {
+    PlanFields {
+        depth: format!("depth of {}", entry.id),
+        ..PlanFields::flags()
+    }
 }
 
 /// The dataset a target record file belongs to: the nearest folder above
@@ -187,14 +195,15 @@ fn plan_one(
     scale: f64,
     camera: crate::perception::CameraModel,
 ) -> Result<Outcome> {
-    let (input, record) = record_plan_input(dir, entry, scale, camera, EVAL_CLEARANCE_M)?;
-    if !matches!(input.target, TargetInput::Depth(..)) {
+    let (parts, record) = record_plan_input(dir, entry, scale, camera, EVAL_CLEARANCE_M)?;
+    if parts.depth.is_none() {
         return Err(Error::invalid(
             "depth",
             format!("target {} has no depth", entry.id),
         ));
     }
-    let answer = predict_and_optimize(model, robot, input, &Default::default())?;
+    let request = PlanRequest::new(parts, &record_fields(entry))?;
+    let answer = predict_and_optimize(model, robot, request, &Default::default())?;
     let last = answer
         .result
         .trajectory

@@ -35,6 +35,7 @@ mod optim_franka;
 mod optim_properties;
 mod optim_requests;
 mod optim_task;
+mod plan_interfaces;
 mod python_client;
 mod robot_cli;
 mod robot_collision_mesh;

@@ -1,6 +1,7 @@
 //! The layout of `src/`: the arrows between the children of every module
 //! folder run one way (no cycle), no library module imports `cli` or
-//! `service`, and no file grows past [`MAX_LINES`].
+//! `service`, the live path imports no offline tool, and no file grows
+//! past [`MAX_LINES`].
 //!
 //! The graph is read from the source text: every `crate::`, `super::` and
 //! `self::` path (grouped `{a, b}` imports too) outside comments and
@@ -303,6 +304,37 @@ fn the_library_never_imports_its_shells() {
         .filter(|(a, b)| shells.contains(&b.as_str()) && !shells.contains(&a.as_str()))
         .collect();
     assert!(bad.is_empty(), "library modules importing a shell: {bad:?}");
+}
+
+/// The modules a request runs through (`/v1/plan`, `/v1/optimize`, `dpmp
+/// plan`), as the crate docs group them.
+const LIVE_PATH: [&str; 10] = [
+    "promp",
+    "geometry",
+    "robot",
+    "scene",
+    "perception",
+    "net",
+    "plan",
+    "optim",
+    "error",
+    "service",
+];
+/// The offline tools (datasets, training, benchmarks, plots, fixtures).
+const OFFLINE_TOOLS: [&str; 6] = ["demos", "synth", "train", "bench", "plot", "fixtures"];
+
+#[test]
+fn the_live_path_never_imports_an_offline_tool() {
+    let g = graph();
+    let top = &g.arrows[&Vec::<String>::new()];
+    let bad: Vec<_> = top
+        .iter()
+        .filter(|(a, b)| LIVE_PATH.contains(&a.as_str()) && OFFLINE_TOOLS.contains(&b.as_str()))
+        .collect();
+    assert!(
+        bad.is_empty(),
+        "live-path modules importing an offline tool: {bad:?}"
+    );
 }
 
 #[test]

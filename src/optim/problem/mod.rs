@@ -85,9 +85,9 @@ impl Problem {
 
     /// The goal's approach axis (unit) and angle tolerance (rad), if any.
     pub fn approach(&self) -> Option<(nalgebra::Vector3<f64>, f64)> {
-        let goal = self.goal.as_ref()?;
-        let axis = nalgebra::Vector3::from(goal.approach_axis?);
-        Some((axis.normalize(), goal.approach_tolerance_rad))
+        let approach = self.goal.as_ref()?.approach()?;
+        let axis = nalgebra::Vector3::from(approach.approach_axis);
+        Some((axis.normalize(), approach.approach_tolerance_rad))
     }
 
     /// Mahalanobis distance `sqrt((w-μ)ᵀ(Σ+λI)⁻¹(w-μ))`.

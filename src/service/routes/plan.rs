@@ -20,13 +20,11 @@
 //! with depth or a target position, `"target"`.
 
 use super::optimize::{check_request_limits, record_solve, solve_control};
-use crate::optim::Task;
+use crate::optim::{GoalApproach, Task};
+use crate::perception::depth::check_scale;
 use crate::perception::depth::{DepthImage, DEFAULT_DEPTH_SCALE_M};
 use crate::perception::CameraModel;
-use crate::plan::{
-    check_standoff, check_target_position, predict_and_optimize, GoalApproach, PlanInput,
-    PlanResponse, TargetInput,
-};
+use crate::plan::{predict_and_optimize, PlanFields, PlanParts, PlanRequest, PlanResponse};
 use crate::service::config::ServiceConfig;
 use crate::service::error::ApiError;
 use crate::service::extract::{
@@ -71,23 +69,13 @@ enum Received {
     },
 }
 
-impl Received {
-    /// The field that carries the colour image, as errors name it.
-    fn image_field(&self) -> &'static str {
-        match self {
-            Received::Json(_) => IMAGE_FIELD,
-            Received::Multipart { .. } => MULTIPART_IMAGE,
-        }
-    }
-}
-
 /// Encoded inputs of one request: (field naming it in errors, bytes).
 struct Encoded {
     image: (&'static str, Vec<u8>),
     depth: Option<(&'static str, Vec<u8>)>,
 }
 
-/// What a job needs to turn a received request into a [`PlanInput`].
+/// What a job needs to turn a received request into a [`PlanRequest`].
 struct Decoding {
     config: ServiceConfig,
     budget: Arc<DecodeBudget>,
@@ -126,15 +114,9 @@ pub async fn plan(
     let response = state
         .limiter()
         .run(deadline, move |job| -> Result<PlanResponse, ApiError> {
-            let image_field = received.image_field();
             let (input, _held) = received.into_input(&decoding)?;
-            check_request_limits(&decoding.config, &input.task)?;
+            check_request_limits(&decoding.config, input.task())?;
             let model = model.ok_or_else(ApiError::model_unavailable)?;
-            if let TargetInput::Depth(..) = input.target {
-                let (w, h) = (input.image.width(), input.image.height());
-                let camera = input.camera.as_ref();
-                crate::plan::check_camera_size(&model, camera, w, h, image_field)?;
-            }
             Ok(predict_and_optimize(
                 &model,
                 &robot,
@@ -188,9 +170,9 @@ async fn read_multipart(state: &AppState, request: Request) -> Result<Received, 
 }
 
 impl Received {
-    /// Parse and decode (in the request's job): the [`PlanInput`] and the
+    /// Parse and decode (in the request's job): the [`PlanRequest`] and the
     /// room its decoded images hold in the budget.
-    fn into_input(self, decoding: &Decoding) -> Result<(PlanInput, Vec<Reservation>), ApiError> {
+    fn into_input(self, decoding: &Decoding) -> Result<(PlanRequest, Vec<Reservation>), ApiError> {
         let (encoded, fields) = match self {
             Received::Json(bytes) => {
                 let mut fields: Map<String, Value> = parse_json(&bytes)?;
@@ -257,14 +239,14 @@ fn malformed_multipart(message: &str) -> ApiError {
     )
 }
 
-/// Validate the non-image fields, parse the rest as the optimiser's
-/// [`Task`] (the prior is the prediction), then decode the image
-/// and the depth within the decode budget.
+/// Take the plan fields out of the body, parse the rest as the optimiser's
+/// [`Task`] (the prior is the prediction), decode the image and the depth
+/// within the decode budget, and validate the whole as a [`PlanRequest`].
 fn finish_input(
     decoding: &Decoding,
     encoded: Encoded,
     mut fields: Map<String, Value>,
-) -> Result<(PlanInput, Vec<Reservation>), ApiError> {
+) -> Result<(PlanRequest, Vec<Reservation>), ApiError> {
     if fields.contains_key("prior") {
         return Err(ApiError::invalid(
             "prior",
@@ -277,12 +259,9 @@ fn finish_input(
         Some(Value::Bool(b)) => b,
         Some(_) => return Err(ApiError::invalid(MASK_FIELD, "must be true or false")),
     };
-    let scale = optional_number(&mut fields, SCALE_FIELD)?;
-    if let Some(v) = scale.filter(|v| !(*v > 0.0 && *v <= 1.0)) {
-        return Err(ApiError::invalid(
-            SCALE_FIELD,
-            format!("must be > 0 and <= 1 (m per depth unit), got {v}"),
-        ));
+    let depth_scale_m = optional_number(&mut fields, SCALE_FIELD)?;
+    if let Some(scale) = depth_scale_m {
+        check_scale(scale, SCALE_FIELD)?;
     }
     let target_position = optional_position(&mut fields)?;
     let goal_standoff_m = optional_number(&mut fields, STANDOFF_FIELD)?;
@@ -299,43 +278,36 @@ fn finish_input(
         decoding.deadline,
     )?;
     let mut held = vec![image_held];
-    check_box_inside(&target_box, &image)?;
-    let target = match (encoded.depth, target_position) {
-        (Some(_), Some(_)) => {
-            return Err(ApiError::invalid(
-                TARGET_FIELD,
-                "send either a depth image or a target position, not both",
-            ))
-        }
-        (Some((field, bytes)), None) => {
-            let (depth, depth_held) = decode_depth(decoding, field, &bytes, scale, &image)?;
+    let depth = match encoded.depth {
+        Some((field, bytes)) => {
+            let (depth, depth_held) = decode_depth(decoding, field, &bytes, depth_scale_m, &image)?;
             held.push(depth_held);
-            TargetInput::Depth(depth, field.to_string())
+            Some(depth)
         }
-        (None, Some(p)) => TargetInput::Position(p),
-        (None, None) => TargetInput::None,
+        None => None,
     };
-    if scale.is_some() && !matches!(target, TargetInput::Depth(..)) {
-        return Err(ApiError::invalid(
-            SCALE_FIELD,
-            "applies only with a depth image",
-        ));
-    }
-    check_standoff(goal_standoff_m, &target, STANDOFF_FIELD)?;
-    let input = PlanInput {
+    let names = if *image_field == MULTIPART_IMAGE {
+        PlanFields::multipart()
+    } else {
+        PlanFields::json()
+    };
+    let parts = PlanParts {
         image,
         target_box,
         mask_applied,
-        target,
+        depth,
+        depth_scale_m,
+        target_position,
         goal_standoff_m,
-        task,
         approach,
         camera,
+        task,
     };
-    Ok((input, held))
+    Ok((PlanRequest::new(parts, &names)?, held))
 }
 
-/// The optional `camera` (intrinsics and mount), validated.
+/// The optional `camera` (intrinsics and mount), parsed (its values are
+/// checked by [`PlanRequest::new`]).
 fn take_camera(fields: &mut Map<String, Value>) -> Result<Option<CameraModel>, ApiError> {
     let Some(value) = fields.remove(CAMERA_FIELD) else {
         return Ok(None);
@@ -346,7 +318,6 @@ fn take_camera(fields: &mut Map<String, Value>) -> Result<Option<CameraModel>, A
             e.inner().to_string(),
         )
     })?;
-    camera.validate(CAMERA_FIELD)?;
     Ok(Some(camera))
 }
 
@@ -422,7 +393,6 @@ fn optional_position(fields: &mut Map<String, Value>) -> Result<Option<[f64; 3]>
             format!("expected 3 numbers [x, y, z], got {}", numbers.len()),
         )
     })?;
-    check_target_position(&p)?;
     Ok(Some(p))
 }
 
@@ -441,23 +411,7 @@ fn parse_box(value: Option<Value>) -> Result<[f64; 4], ApiError> {
             format!("expected 4 numbers [x1, y1, x2, y2], got {}", numbers.len()),
         )
     })?;
-    crate::error::ensure_finite(BOX_FIELD, &b)?;
-    if b[0] >= b[2] || b[1] >= b[3] {
-        return Err(ApiError::invalid(
-            BOX_FIELD,
-            format!("needs x1 < x2 and y1 < y2, got {b:?}"),
-        ));
-    }
     Ok(b)
-}
-
-fn check_box_inside(b: &[f64; 4], image: &DynamicImage) -> Result<(), ApiError> {
-    Ok(crate::plan::check_target_box(
-        b,
-        image.width(),
-        image.height(),
-        BOX_FIELD,
-    )?)
 }
 
 #[cfg(test)]
@@ -472,7 +426,6 @@ mod tests {
         );
         for bad in [
             serde_json::json!([1, 2, 3]),
-            serde_json::json!([3, 2, 1, 4]),
             serde_json::json!([1, 2, 3, "4"]),
             serde_json::json!("box"),
         ] {
@@ -487,8 +440,5 @@ mod tests {
             parse_box(None).unwrap_err().field.as_deref(),
             Some(BOX_FIELD)
         );
-        let img = DynamicImage::new_rgb8(64, 48);
-        assert!(check_box_inside(&[0.0, 0.0, 64.0, 48.0], &img).is_ok());
-        assert!(check_box_inside(&[0.0, 0.0, 64.5, 48.0], &img).is_err());
     }
 }

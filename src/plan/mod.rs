@@ -1,0 +1,183 @@
+//! The image → plan pipeline, as one library call ([`predict_and_optimize`]):
+//!
+//! ```text
+//! image + target box ──► network prior (net)
+//! depth + box + camera ──► 3-D berry centre (perception) ──► pre-grasp goal
+//! prior + goal + scene ──► optimiser (optim) ──► trajectory + report
+//! ```
+//!
+//! `POST /v1/plan` and `dpmp plan` are shells over it: they read their
+//! inputs into [`PlanParts`], validate them once into a [`PlanRequest`]
+//! ([`request`]) and print or send the [`PlanResponse`]. [`goal`] turns a
+//! 3-D target into the optimiser's goal and conditions the prior on it.
+//!
+//! **The goal from the target.** When the caller sends an aligned depth
+//! image (or its own 3-D target position), the berry centre becomes a
+//! pre-grasp goal the way the demonstrations were made: `goal_standoff_m`
+//! ([`DEFAULT_GOAL_STANDOFF_M`]) short of the berry along the line from the
+//! home TCP to it, with tolerance [`GOAL_TOLERANCE_M`]. The goal enters as
+//! the optimiser's goal constraint (the final TCP within the tolerance),
+//! so the answer meets it whenever it is `optimal`; the network's prior
+//! still decides the shape of the motion. The depth is back-projected
+//! through the camera the model records ([`crate::net::ModelConfig`]'s
+//! `camera`, the synthetic generator's by default) posed at the robot's
+//! home configuration, where the images are taken. Without depth and
+//! target position the request is planned exactly as before (no goal is
+//! added). A model conditioned on depth
+//! ([`crate::net::ModelConfig::depth_condition`]) reads the measured depth,
+//! or a client position's depth in the camera; it cannot plan without one.
+
+pub mod goal;
+pub mod request;
+
+pub use goal::{
+    prior_towards_goal, TargetReport, TargetSource, DEFAULT_GOAL_STANDOFF_M, GOAL_PRIOR_STD_M,
+    GOAL_TOLERANCE_M,
+};
+pub use request::{
+    check_target_box, check_target_position, PlanFields, PlanParts, PlanRequest, TargetInput,
+    MAX_GOAL_STANDOFF_M, MIN_BOX_PX,
+};
+
+use crate::net::Model;
+use crate::optim::{optimize_prior, OptimizeResponse, SolveControl};
+use crate::promp::distribution::matrix_rows;
+use crate::promp::{Basis, WeightDistribution};
+use crate::robot::Robot;
+use crate::{Error, Result};
+use goal::{goal_from_target, locate};
+use serde::Serialize;
+use std::sync::Arc;
+
+/// The predicted prior as trajectories (`T x dof`, rows are time samples).
+#[derive(Debug, Serialize)]
+pub struct PriorTrajectory {
+    /// Mean joint positions.
+    pub mean: Vec<Vec<f64>>,
+    /// Standard deviation of the joint positions.
+    pub std: Vec<Vec<f64>>,
+}
+
+/// Body of a `/v1/plan` answer.
+#[derive(Debug, Serialize)]
+pub struct PlanResponse {
+    /// The optimiser's answer for the predicted prior.
+    #[serde(flatten)]
+    pub result: OptimizeResponse,
+    /// The prior the optimiser started from: the network's, conditioned on
+    /// the goal when a 3-D target was given ([`prior_towards_goal`]).
+    pub prior: PriorTrajectory,
+    /// Name of the model that predicted it.
+    pub model: String,
+    /// The 3-D target, when depth or a target position was given.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub target: Option<TargetReport>,
+}
+
+/// Network prior, goal from the target (if any), then the optimiser.
+pub fn predict_and_optimize(
+    model: &Arc<Model>,
+    robot: &Arc<Robot>,
+    request: PlanRequest,
+    ctl: &SolveControl,
+) -> Result<PlanResponse> {
+    request.check_camera_size(model)?;
+    let PlanRequest {
+        image,
+        target_box,
+        mask_applied,
+        target,
+        goal_standoff_m,
+        approach,
+        camera,
+        mut task,
+        ..
+    } = request;
+    let camera = camera.unwrap_or_else(|| model.config().camera_model());
+    let located = locate(&camera, robot, &target, &target_box)?;
+    let depth_m = located.as_ref().map(|l| l.camera_depth_m);
+    let target = match located {
+        Some(located) => {
+            let report = goal_from_target(robot, located, goal_standoff_m)?;
+            task.goal = Some(report.goal(approach.as_ref()));
+            Some(report)
+        }
+        None => None,
+    };
+    let prediction = model
+        .predict_with_depth(&image, target_box, mask_applied, depth_m)
+        .map_err(|e| match e {
+            // The network's own output failed its checks: a model fault.
+            Error::Invalid { ref field, .. } if field.starts_with("prediction") => {
+                model_fault(model, &e)
+            }
+            other => other,
+        })?;
+    let basis = task.basis()?;
+    check_dimensions(&prediction.distribution, robot, &basis)?;
+    check_model_prior(model, &prediction.distribution, robot, &basis)?;
+    let distribution = match &target {
+        Some(report) => prior_towards_goal(&prediction.distribution, robot, &basis, report)?,
+        None => prediction.distribution,
+    };
+    let prior = prior_trajectory(&distribution, &basis);
+    // The optimiser checks the (conditioned) prior as it checks a
+    // request's; a prior it refuses came from the model.
+    let result = optimize_prior(&distribution, &task, &basis, robot, ctl).map_err(|e| match e {
+        Error::Invalid { ref field, .. } if field.starts_with("prior") => model_fault(model, &e),
+        other => other,
+    })?;
+    Ok(PlanResponse {
+        result,
+        prior,
+        model: model.name().to_string(),
+        target,
+    })
+}
+
+/// The network's (conditioned) prediction must be a prior the optimiser
+/// accepts; when it is not, the model is at fault (corrupt or badly trained
+/// weights), never the request: [`Error::Model`].
+fn check_model_prior(
+    model: &Model,
+    d: &WeightDistribution,
+    robot: &Robot,
+    basis: &Basis,
+) -> Result<()> {
+    crate::optim::request::check_prior(d, robot.dof(), basis.n_basis())
+        .map_err(|e| model_fault(model, &e))
+}
+
+/// A model's output that failed a check, as [`Error::Model`].
+fn model_fault(model: &Model, e: &Error) -> Error {
+    Error::Model(format!(
+        "the model {:?} predicted an invalid prior ({e}); its weights may be corrupt",
+        model.name()
+    ))
+}
+
+fn check_dimensions(d: &WeightDistribution, robot: &Robot, basis: &Basis) -> Result<()> {
+    let expected = robot.dof() * basis.n_basis();
+    if d.dim() == expected {
+        return Ok(());
+    }
+    Err(Error::invalid(
+        "promp.n_basis",
+        format!(
+            "the model predicts {} weights = {} joints x {} basis functions; \
+             the request asks for {} x {}",
+            d.dim(),
+            robot.dof(),
+            d.dim() / robot.dof().max(1),
+            robot.dof(),
+            basis.n_basis()
+        ),
+    ))
+}
+
+fn prior_trajectory(d: &WeightDistribution, basis: &Basis) -> PriorTrajectory {
+    PriorTrajectory {
+        mean: matrix_rows(&d.trajectory_mean(basis)),
+        std: matrix_rows(&d.trajectory_std(basis, 0.0)),
+    }
+}
