@@ -5,7 +5,11 @@
 //! Then the hull-versus-segment query alone: the local certified walk
 //! against the full face scan on the same queries.
 //!
-//! `cargo bench --bench clearance` (`-- hull_query` for the query alone).
+//! Last, a sensed point cloud as one `points` obstacle (its box tree)
+//! against the same balls as separate spheres.
+//!
+//! `cargo bench --bench clearance` (`-- hull_query` for the query alone,
+//! `-- cloud` for the point cloud).
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use dpmp::robot::{Robot, PANDA_HOME};
@@ -102,5 +106,60 @@ fn hull_query(c: &mut Criterion) {
     });
 }
 
-criterion_group!(benches, clearance, hull_query);
+/// A sensed cloud: `n` points on a 30 x 30 cm leaf wall `ahead` m in front
+/// of the gripper at home, as one `points` obstacle (the box tree) and, in
+/// the same run, as `n` separate spheres (a scan over every one).
+fn cloud_points(robot: &Robot, n: usize, ahead: f64) -> Vec<[f64; 3]> {
+    let tcp = robot.tcp_pose(&PANDA_HOME);
+    let side = (n as f64).sqrt().ceil() as usize;
+    (0..n)
+        .map(|i| {
+            let (u, v) = ((i % side) as f64, (i / side) as f64);
+            let local = Point3::new(
+                -0.15 + 0.3 * u / side as f64,
+                -0.15 + 0.3 * v / side as f64,
+                ahead + 0.01 * (u * 0.9).sin() * (v * 0.7).cos(),
+            );
+            let p = tcp * local;
+            [p.x, p.y, p.z]
+        })
+        .collect()
+}
+
+fn cloud(c: &mut Criterion) {
+    let robot = Robot::panda().expect("the shipped Panda loads");
+    let frames = robot.fk(&PANDA_HOME);
+    for n in [1_000, 10_000] {
+        let points = cloud_points(&robot, n, 0.06);
+        let tree = Scene::new(vec![Obstacle {
+            id: "sensed".into(),
+            shape: ObstacleShape::Points {
+                points: points.clone(),
+                radius: 0.005,
+            },
+        }])
+        .expect("valid cloud");
+        let spheres = Scene::new(
+            points
+                .iter()
+                .enumerate()
+                .map(|(i, p)| Obstacle {
+                    id: format!("p{i}"),
+                    shape: ObstacleShape::Sphere(dpmp::geometry::Sphere {
+                        center: *p,
+                        radius: 0.005,
+                    }),
+                })
+                .collect(),
+        )
+        .expect("valid spheres");
+        for (name, scene) in [("tree", &tree), ("spheres", &spheres)] {
+            c.bench_function(&format!("cloud/clearances_within_5cm_{n}_{name}"), |b| {
+                b.iter(|| scene.clearances_within(&robot, black_box(&frames), 0.05))
+            });
+        }
+    }
+}
+
+criterion_group!(benches, clearance, hull_query, cloud);
 criterion_main!(benches);

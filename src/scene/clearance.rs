@@ -11,6 +11,7 @@
 use super::broadphase::{Bounds, Core};
 use super::contact::PairContact;
 use super::distance::pair_contact;
+use super::part_tree::PartTree;
 use super::shape::{CompiledObstacle, RobotPart};
 use super::Scene;
 use crate::robot::{Frames, Robot, ShapeGeometry};
@@ -126,12 +127,40 @@ fn obstacle_contact(
     obstacle: &CompiledObstacle,
     prediction: f64,
 ) -> Option<PairContact> {
+    if let Some(tree) = &obstacle.tree {
+        return tree_contact(shape, obstacle, tree, prediction);
+    }
     obstacle
         .parts
         .iter()
         .filter(|part| !ruled_out(shape.core.gap(&part.core), prediction))
         .filter_map(|part| pair_contact(&shape.part, part, prediction))
         .min_by(|a, b| a.distance.total_cmp(&b.distance))
+}
+
+/// [`obstacle_contact`] through the obstacle's part tree: only the parts
+/// whose boxes come within the closest contact found so far (at first
+/// `prediction`) are measured; the first of equally close parts wins.
+fn tree_contact(
+    shape: &PlacedShape,
+    obstacle: &CompiledObstacle,
+    tree: &PartTree,
+    prediction: f64,
+) -> Option<PairContact> {
+    let mut best: Option<PairContact> = None;
+    tree.visit(&shape.bounds, prediction, |i| {
+        let limit = best.map_or(prediction, |b| b.distance.min(prediction));
+        let part = &obstacle.parts[i];
+        if !ruled_out(shape.core.gap(&part.core), limit) {
+            if let Some(c) = pair_contact(&shape.part, part, limit) {
+                if best.is_none_or(|b| c.distance < b.distance) {
+                    best = Some(c);
+                }
+            }
+        }
+        best.map_or(prediction, |b| b.distance.min(prediction))
+    });
+    best
 }
 
 impl Scene {

@@ -4,6 +4,8 @@
 //! - [`obstacle`]: the serde types of the request schema and validation;
 //! - [`shape`]: obstacles and robot primitives as parry3d shapes;
 //! - [`broadphase`]: axis-aligned bounds and their gaps;
+//! - [`part_tree`]: a box tree over the parts of a many-part obstacle (a
+//!   point cloud), so queries cost what is near the robot;
 //! - [`contact`]: [`contact::PairContact`], one pair's answer;
 //! - [`distance`]: one pair's signed distance, witness points and normal
 //!   ([`round_contact`]: the closed forms for round shapes);
@@ -18,6 +20,7 @@ pub mod compiled;
 pub mod contact;
 pub mod distance;
 pub mod obstacle;
+pub mod part_tree;
 pub mod round_contact;
 pub mod shape;
 

@@ -8,6 +8,7 @@
 //! {"id": "leaf", "type": "convex", "points": [[x, y, z], ...]}
 //! {"id": "berry-3", "type": "berry", "center": [x, y, z], "radius": 0.014,
 //!  "elongation": 0.006, "stem_top": [x, y, z], "stem_radius": 0.002}
+//! {"id": "sensed", "type": "points", "points": [[x, y, z], ...], "radius": 0.005}
 //! ```
 //!
 //! Unknown fields are rejected; a box `rotation` defaults to identity.
@@ -28,6 +29,10 @@ pub const MAX_COORDINATE_M: f64 = 100.0;
 
 /// Largest accepted size (radius, half extent, elongation; m).
 pub const MAX_SIZE_M: f64 = 100.0;
+
+/// Largest number of points in one `points` obstacle (a 640 x 480 depth
+/// image downsampled to 5 mm voxels gives a few thousand).
+pub const MAX_CLOUD_POINTS: usize = 100_000;
 
 /// Smallest accepted size (m): a nanometre, far below any real obstacle
 /// and still a normal single-precision number for the narrow phase.
@@ -70,6 +75,15 @@ pub enum ObstacleShape {
     },
     /// A strawberry with its stem ([`BerryShape`]).
     Berry(BerryShape),
+    /// A point cloud (base frame): every point within `radius` of one of
+    /// `points`, e.g. a depth camera's surface samples inflated by its
+    /// noise. Not convex: clearance is to the closest point's ball.
+    Points {
+        /// The points (at least one, at most [`MAX_CLOUD_POINTS`]).
+        points: Vec<[f64; 3]>,
+        /// Radius of the ball around each point (m, > 0).
+        radius: f64,
+    },
 }
 
 /// A strawberry with its stem: the body is the set of points within
@@ -137,7 +151,16 @@ impl ObstacleShape {
             ObstacleShape::Box(b) => Some((*b).into()),
             ObstacleShape::Cylinder { .. }
             | ObstacleShape::Convex { .. }
-            | ObstacleShape::Berry(_) => None,
+            | ObstacleShape::Berry(_)
+            | ObstacleShape::Points { .. } => None,
+        }
+    }
+
+    /// The number of cloud points (0 for every shape but `points`).
+    pub fn point_count(&self) -> usize {
+        match self {
+            ObstacleShape::Points { points, .. } => points.len(),
+            _ => 0,
         }
     }
 
@@ -150,7 +173,7 @@ impl ObstacleShape {
             ObstacleShape::Capsule(Capsule { a, b, .. }) | ObstacleShape::Cylinder { a, b, .. } => {
                 midpoint(a, b)
             }
-            ObstacleShape::Convex { points } => {
+            ObstacleShape::Convex { points } | ObstacleShape::Points { points, .. } => {
                 let sum = points
                     .iter()
                     .fold(Vector3::zeros(), |s, p| s + Vector3::from(*p));
@@ -174,6 +197,7 @@ impl Obstacle {
             ObstacleShape::Box(b) => check.oriented_box(b),
             ObstacleShape::Convex { points } => check.convex(points),
             ObstacleShape::Berry(berry) => check.berry(berry),
+            ObstacleShape::Points { points, radius } => check.cloud(points, *radius),
         }
     }
 }
@@ -283,6 +307,23 @@ impl Check<'_> {
             return Err(self.fail("points", "the points are coplanar (the hull has no volume)"));
         }
         Ok(())
+    }
+
+    /// One to [`MAX_CLOUD_POINTS`] finite points, radius > 0.
+    fn cloud(&self, points: &[[f64; 3]], radius: f64) -> Result<()> {
+        if points.is_empty() || points.len() > MAX_CLOUD_POINTS {
+            return Err(self.fail(
+                "points",
+                format!(
+                    "a point cloud needs 1 to {MAX_CLOUD_POINTS} points, got {}",
+                    points.len()
+                ),
+            ));
+        }
+        for (i, p) in points.iter().enumerate() {
+            self.finite(&format!("points[{i}]"), p)?;
+        }
+        self.positive("radius", radius)
     }
 
     /// Finite centre and stem top outside the body; radius > 0, elongation

@@ -6,6 +6,7 @@
 
 use super::broadphase::{Bounds, Core};
 use super::obstacle::{BerryShape, ObstacleShape};
+use super::part_tree::{PartTree, TREE_MIN_PARTS};
 use crate::geometry::{quaternion, Capsule, OrientedBox, Primitive, Sphere};
 use crate::robot::hull::ConvexHull;
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
@@ -56,10 +57,13 @@ impl std::fmt::Debug for Part {
 /// A validated obstacle compiled into convex parts and bounds.
 #[derive(Clone, Debug)]
 pub struct CompiledObstacle {
-    /// Convex parts (one, or two for a berry).
+    /// Convex parts (one, two for a berry, one ball per point of a cloud).
     pub parts: Vec<Part>,
     /// Bounds of all parts.
     pub bounds: Bounds,
+    /// A tree over the parts' boxes, when there are many
+    /// ([`TREE_MIN_PARTS`]): queries visit only the parts near them.
+    pub tree: Option<PartTree>,
 }
 
 /// Compile a validated obstacle; `None` only if parry rejects a hull that
@@ -72,6 +76,29 @@ pub fn compile_obstacle(shape: &ObstacleShape) -> Option<CompiledObstacle> {
         ObstacleShape::Cylinder { a, b, radius } => Some(cylinder_obstacle(a, b, *radius)),
         ObstacleShape::Convex { points } => convex_obstacle(points),
         ObstacleShape::Berry(berry) => Some(berry_obstacle(berry)),
+        ObstacleShape::Points { points, radius } => Some(cloud_obstacle(points, *radius)),
+    }
+}
+
+/// A point cloud: one ball of `radius` per point, with a tree over them.
+fn cloud_obstacle(points: &[[f64; 3]], radius: f64) -> CompiledObstacle {
+    let balls: Vec<Primitive> = points
+        .iter()
+        .map(|&center| Sphere { center, radius }.into())
+        .collect();
+    let boxes: Vec<Bounds> = balls.iter().map(Bounds::of_primitive).collect();
+    let bounds = boxes
+        .iter()
+        .copied()
+        .reduce(|a, b| a.merged(&b))
+        .unwrap_or_else(|| Bounds::ball(&Vector3::zeros(), radius));
+    let tree = (boxes.len() > TREE_MIN_PARTS)
+        .then(|| PartTree::new(&boxes))
+        .flatten();
+    CompiledObstacle {
+        parts: balls.iter().map(primitive_part).collect(),
+        bounds,
+        tree,
     }
 }
 
@@ -162,6 +189,7 @@ fn berry_obstacle(berry: &BerryShape) -> CompiledObstacle {
     CompiledObstacle {
         bounds: Bounds::of_primitive(&body).merged(&Bounds::of_primitive(&stem)),
         parts: vec![primitive_part(&body), primitive_part(&stem)],
+        tree: None,
     }
 }
 
@@ -169,6 +197,7 @@ fn single(part: Part, bounds: Bounds) -> CompiledObstacle {
     CompiledObstacle {
         parts: vec![part],
         bounds,
+        tree: None,
     }
 }
 

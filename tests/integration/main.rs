@@ -45,5 +45,6 @@ mod robot_kinematics;
 mod robot_urdf_mesh;
 mod scene_clearance;
 mod scene_obstacles;
+mod scene_points;
 mod synth_dataset;
 mod synth_demos;

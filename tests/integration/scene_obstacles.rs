@@ -229,7 +229,7 @@ fn wire_format_is_pinned() {
     );
     assert_eq!(
         error(r#"{"obstacles": [{"id": "t", "type": "torus", "center": [0,0,0]}]}"#),
-        r#"obstacle "t": unknown variant `torus`, expected one of `sphere`, `capsule`, `cylinder`, `box`, `convex`, `berry` at line 1 column 63"#
+        r#"obstacle "t": unknown variant `torus`, expected one of `sphere`, `capsule`, `cylinder`, `box`, `convex`, `berry`, `points` at line 1 column 63"#
     );
     assert_eq!(
         error(r#"{"obstacles": [{"id": "s", "type": "sphere", "center": [0,0], "radius": 0.1}]}"#),

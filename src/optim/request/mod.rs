@@ -16,6 +16,8 @@ use serde::{Deserialize, Serialize};
 
 /// Largest accepted number of obstacles.
 pub const MAX_OBSTACLES: usize = 1000;
+/// Largest number of cloud points (`points` obstacles) in one request.
+pub const MAX_REQUEST_POINTS: usize = 200_000;
 /// Largest accepted `samples`.
 pub const MAX_EXTRA_SAMPLES: usize = 100;
 /// Largest accepted `promp.n_samples`.

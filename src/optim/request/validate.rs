@@ -5,6 +5,7 @@
 
 use super::{
     OptimizeRequest, PriorSpec, Task, MAX_EXTRA_SAMPLES, MAX_OBSTACLES, MAX_PHASE_SAMPLES,
+    MAX_REQUEST_POINTS,
 };
 use crate::error::{ensure_finite, ensure_in_range as check_range, ensure_positive};
 use crate::optim::problem::linear::LinearSet;
@@ -177,6 +178,13 @@ impl Task {
             if let Some(limits) = limits {
                 check_positive_per_joint(field, limits, robot.dof())?;
             }
+        }
+        let points: usize = self.obstacles.iter().map(|o| o.shape.point_count()).sum();
+        if points > MAX_REQUEST_POINTS {
+            return Err(Error::invalid(
+                "obstacles",
+                format!("at most {MAX_REQUEST_POINTS} cloud points in all, got {points}"),
+            ));
         }
         if self.obstacles.len() > MAX_OBSTACLES {
             return Err(Error::invalid(
