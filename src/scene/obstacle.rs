@@ -9,6 +9,7 @@
 //! {"id": "berry-3", "type": "berry", "center": [x, y, z], "radius": 0.014,
 //!  "elongation": 0.006, "stem_top": [x, y, z], "stem_radius": 0.002}
 //! {"id": "sensed", "type": "points", "points": [[x, y, z], ...], "radius": 0.005}
+//! {"id": "sensed", "type": "points", "points_base64": "<x, y, z as little-endian f32>", "radius": 0.005}
 //! ```
 //!
 //! Unknown fields are rejected; a box `rotation` defaults to identity.
@@ -136,10 +137,67 @@ impl<'de> Deserialize<'de> for Obstacle {
             }
             None => return Err(D::Error::custom("obstacle without an \"id\"")),
         };
+        decode_compact_points(&mut map)
+            .map_err(|e| D::Error::custom(format!("obstacle \"{id}\": {e}")))?;
         let shape = ObstacleShape::deserialize(serde_json::Value::Object(map))
             .map_err(|e| D::Error::custom(format!("obstacle \"{id}\": {e}")))?;
         Ok(Obstacle { id, shape })
     }
+}
+
+/// The compact form of a `points` obstacle's cloud: `points_base64`, the
+/// points as little-endian `f32` x, y, z triples (12 bytes a point) in
+/// standard base64, instead of `points`.
+pub const POINTS_BASE64_FIELD: &str = "points_base64";
+
+/// A `points_base64` member replaced by the `points` array it encodes
+/// (exact: every `f32` is an `f64`); an error says what is wrong with it.
+fn decode_compact_points(
+    map: &mut serde_json::Map<String, serde_json::Value>,
+) -> std::result::Result<(), String> {
+    use base64::Engine as _;
+    let Some(value) = map.remove(POINTS_BASE64_FIELD) else {
+        return Ok(());
+    };
+    if map.get("type").and_then(|t| t.as_str()) != Some("points") {
+        return Err(format!(
+            "{POINTS_BASE64_FIELD} applies only to type \"points\""
+        ));
+    }
+    if map.contains_key("points") {
+        return Err(format!("send points or {POINTS_BASE64_FIELD}, not both"));
+    }
+    let text = value
+        .as_str()
+        .ok_or_else(|| format!("{POINTS_BASE64_FIELD} must be a base64 string"))?;
+    let bytes = base64::engine::general_purpose::STANDARD
+        .decode(text.trim())
+        .map_err(|e| format!("{POINTS_BASE64_FIELD} is not base64: {e}"))?;
+    if bytes.len() % 12 != 0 {
+        return Err(format!(
+            "{POINTS_BASE64_FIELD} holds {} bytes, not a whole number of 12-byte points (x, y, z as little-endian f32)",
+            bytes.len()
+        ));
+    }
+    if bytes.len() / 12 > MAX_CLOUD_POINTS {
+        return Err(format!(
+            "{POINTS_BASE64_FIELD} holds {} points, more than the {MAX_CLOUD_POINTS} allowed",
+            bytes.len() / 12
+        ));
+    }
+    let coordinate = |c: &[u8]| f64::from(f32::from_le_bytes([c[0], c[1], c[2], c[3]]));
+    let mut points = Vec::with_capacity(bytes.len() / 12);
+    for (i, p) in bytes.chunks_exact(12).enumerate() {
+        let xyz: Vec<f64> = p.chunks_exact(4).map(coordinate).collect();
+        if xyz.iter().any(|c| !c.is_finite()) {
+            return Err(format!(
+                "{POINTS_BASE64_FIELD}: point {i} has a non-finite coordinate {xyz:?}"
+            ));
+        }
+        points.push(serde_json::json!(xyz));
+    }
+    map.insert("points".into(), serde_json::Value::Array(points));
+    Ok(())
 }
 
 impl ObstacleShape {

@@ -29,6 +29,18 @@ fn shells(centres: &[[f64; 3]], shell: f64, n: usize, seed: u64) -> Vec<[f64; 3]
         .collect()
 }
 
+/// The request's obstacles as a sensed cloud: 60 points on a 12 mm shell
+/// around each one's centre (with balls of 4 mm, the berries' surfaces).
+fn sensed(request: &dpmp::optim::OptimizeRequest, seed: u64) -> Vec<[f64; 3]> {
+    let centres: Vec<[f64; 3]> = request
+        .task
+        .obstacles
+        .iter()
+        .map(|o| o.shape.center())
+        .collect();
+    shells(&centres, 0.012, 60, seed)
+}
+
 fn cloud(id: &str, points: Vec<[f64; 3]>, radius: f64) -> Obstacle {
     obstacle(id, ObstacleShape::Points { points, radius })
 }
@@ -155,15 +167,7 @@ fn an_optimal_answer_clears_the_cloud_posted_as_spheres() {
     let mut solved = 0;
     for seed in [1u64, 4, 6] {
         let mut request = typical_request(&robot, seed, &ExampleSettings::default()).unwrap();
-        // Each berry and stem becomes the cloud of its surface (points 4 mm
-        // inside it, balls of 4 mm): the sensed version of the same scene.
-        let centres: Vec<[f64; 3]> = request
-            .task
-            .obstacles
-            .iter()
-            .map(|o| o.shape.center())
-            .collect();
-        let points = shells(&centres, 0.012, 60, seed);
+        let points = sensed(&request, seed);
         request.task.obstacles = vec![cloud("sensed", points.clone(), 0.004)];
         let answer = optimize(&request, &robot).unwrap();
         if answer.status != Status::Optimal {
@@ -211,4 +215,95 @@ fn a_cloud_is_validated_naming_the_field() {
     )
     .unwrap_err();
     assert!(e.to_string().contains("unknown field"), "{e}");
+}
+
+/// `points` as the compact form's bytes, base64.
+fn compact(points: &[[f32; 3]]) -> String {
+    use base64::Engine as _;
+    let bytes: Vec<u8> = points
+        .iter()
+        .flat_map(|p| p.iter().flat_map(|c| c.to_le_bytes()))
+        .collect();
+    base64::engine::general_purpose::STANDARD.encode(bytes)
+}
+
+#[test]
+fn the_compact_form_is_the_same_cloud_and_its_mistakes_are_named() {
+    let cloud_f32: Vec<[f32; 3]> = (0..50)
+        .map(|i| [0.4 + 0.01 * i as f32, -0.1, 0.3 + 0.002 * i as f32])
+        .collect();
+    let text = format!(
+        r#"{{"id": "s", "type": "points", "points_base64": "{}", "radius": 0.005}}"#,
+        compact(&cloud_f32)
+    );
+    let parsed: Obstacle = serde_json::from_str(&text).unwrap();
+    let expected: Vec<[f64; 3]> = cloud_f32
+        .iter()
+        .map(|p| [f64::from(p[0]), f64::from(p[1]), f64::from(p[2])])
+        .collect();
+    assert_eq!(
+        parsed.shape,
+        ObstacleShape::Points {
+            points: expected,
+            radius: 0.005
+        }
+    );
+    let refused = |body: String| {
+        serde_json::from_str::<Obstacle>(&body)
+            .unwrap_err()
+            .to_string()
+    };
+    let e = refused(
+        r#"{"id": "s", "type": "points", "points_base64": "AAAA", "radius": 0.005}"#.into(),
+    );
+    assert!(e.contains("12-byte points") && e.contains("\"s\""), "{e}");
+    let e =
+        refused(r#"{"id": "s", "type": "points", "points_base64": "*!", "radius": 0.005}"#.into());
+    assert!(e.contains("not base64"), "{e}");
+    let e = refused(format!(
+        r#"{{"id": "s", "type": "points", "points": [[0,0,0]], "points_base64": "{}", "radius": 0.005}}"#,
+        compact(&cloud_f32)
+    ));
+    assert!(e.contains("not both"), "{e}");
+    let e = refused(
+        r#"{"id": "s", "type": "sphere", "points_base64": "", "center": [0,0,0], "radius": 0.005}"#
+            .into(),
+    );
+    assert!(e.contains("only to type"), "{e}");
+    // A non-finite coordinate in the bytes is named with its point.
+    let e = refused(format!(
+        r#"{{"id": "s", "type": "points", "points_base64": "{}", "radius": 0.005}}"#,
+        compact(&[[0.1, 0.2, 0.3], [0.1, f32::NAN, 0.3]])
+    ));
+    assert!(e.contains("point 1 has a non-finite coordinate"), "{e}");
+}
+
+#[test]
+fn the_service_takes_a_compact_cloud_and_caps_the_points_per_request() {
+    use crate::common::http::{client, field, post_json, start, test_config};
+    let server = start(test_config());
+    let robot = Robot::panda().unwrap();
+    let request = typical_request(&robot, 1, &ExampleSettings::default()).unwrap();
+    let mut body = serde_json::to_value(&request).unwrap();
+    let points: Vec<[f32; 3]> = sensed(&request, 1)
+        .iter()
+        .map(|p| [p[0] as f32, p[1] as f32, p[2] as f32])
+        .collect();
+    body["obstacles"] = serde_json::json!([{
+        "id": "sensed", "type": "points", "points_base64": compact(&points), "radius": 0.004
+    }]);
+    let (status, answer) = post_json(&client(), &server.url("/v1/optimize"), body.to_string());
+    assert_eq!(status, 200, "{answer}");
+    assert!(answer["report"]["min_clearance_m"].is_number(), "{answer}");
+    // Three clouds of 70,000 points: over the 200,000 a request may hold.
+    let big = compact(&vec![[0.5f32, 0.5, 0.5]; 70_000]);
+    body["obstacles"] = (0..3)
+        .map(|i| serde_json::json!({"id": format!("c{i}"), "type": "points", "points_base64": big, "radius": 0.004}))
+        .collect();
+    let (status, answer) = post_json(&client(), &server.url("/v1/optimize"), body.to_string());
+    assert_eq!(
+        (status, field(&answer)),
+        (422, Some("obstacles")),
+        "{answer}"
+    );
 }
