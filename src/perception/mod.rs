@@ -1,15 +1,18 @@
 //! What the gripper camera measures, as geometry: the pinhole model and its
 //! mount on the gripper ([`camera`]), aligned z-depth images ([`depth`]),
-//! and the 3-D position of a boxed target from depth ([`target`]).
+//! the 3-D position of a boxed target from depth ([`target`]), and the
+//! point cloud of what the camera sees ([`cloud`]).
 //!
 //! The synthetic data generator ([`crate::synth`]) renders through the same
 //! camera model that planning back-projects through, and a dataset records
 //! it, so a depth image and a box mean the same thing in both.
 
 pub mod camera;
+pub mod cloud;
 pub mod depth;
 pub mod target;
 
 pub use camera::{Camera, CameraModel, Intrinsics};
+pub use cloud::{depth_cloud, CloudSettings, KeepOut, SensedCloud};
 pub use depth::DepthImage;
 pub use target::{locate_target, TargetEstimate};

@@ -1,0 +1,200 @@
+//! The world the camera sees: an aligned depth image back-projected through
+//! the camera that took it into a base-frame point cloud, with invalid and
+//! out-of-range pixels dropped, the target berry kept out (the gripper must
+//! reach it), and the rest downsampled to one point per voxel — what a
+//! `points` obstacle takes.
+//!
+//! The cloud holds only the surfaces the camera saw: what hides behind them
+//! (the far side of a leaf, a stem behind a berry) and what lies outside
+//! the view is not in it.
+
+use super::camera::Camera;
+use super::depth::DepthImage;
+use nalgebra::{Point3, Vector3};
+use std::collections::BTreeMap;
+
+/// Default voxel edge of the downsampled cloud (m).
+pub const DEFAULT_VOXEL_M: f64 = 0.005;
+
+/// Default farthest depth kept (m): beyond it a return is background for a
+/// hand-mounted camera at the plant.
+pub const DEFAULT_MAX_RANGE_M: f64 = 1.2;
+
+/// How the cloud is made.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CloudSettings {
+    /// Voxel edge (m): one point (the mean of its returns) per voxel.
+    pub voxel_m: f64,
+    /// Returns deeper than this (m, along the optical axis) are dropped.
+    pub max_range_m: f64,
+}
+
+impl Default for CloudSettings {
+    fn default() -> Self {
+        CloudSettings {
+            voxel_m: DEFAULT_VOXEL_M,
+            max_range_m: DEFAULT_MAX_RANGE_M,
+        }
+    }
+}
+
+/// The target kept out of the cloud: the pixels of its box, and any point
+/// within `radius_m` of its centre.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct KeepOut {
+    /// The target box `[x1, y1, x2, y2]` (px).
+    pub target_box: [f64; 4],
+    /// The target's centre (m, base frame).
+    pub center: [f64; 3],
+    /// Radius around the centre kept clear (m).
+    pub radius_m: f64,
+}
+
+/// A sensed cloud and what went into it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SensedCloud {
+    /// One point per occupied voxel (m, base frame), in voxel order.
+    pub points: Vec<[f64; 3]>,
+    /// Pixels with a depth return.
+    pub returns: usize,
+    /// Returns dropped beyond the range.
+    pub out_of_range: usize,
+    /// Returns removed as the target.
+    pub removed_as_target: usize,
+}
+
+/// The cloud of `depth` seen by `camera` (the pose it was taken from).
+pub fn depth_cloud(
+    depth: &DepthImage,
+    camera: &Camera,
+    settings: &CloudSettings,
+    keep_out: Option<&KeepOut>,
+) -> SensedCloud {
+    let mut voxels: BTreeMap<[i64; 3], (Vector3<f64>, usize)> = BTreeMap::new();
+    let (mut returns, mut out_of_range, mut removed_as_target) = (0, 0, 0);
+    for y in 0..depth.height() {
+        for x in 0..depth.width() {
+            let Some(z) = depth.metres(x, y) else {
+                continue;
+            };
+            returns += 1;
+            if z > settings.max_range_m {
+                out_of_range += 1;
+                continue;
+            }
+            let (u, v) = (f64::from(x) + 0.5, f64::from(y) + 0.5);
+            let p = camera.back_project(u, v, z);
+            if keep_out.is_some_and(|k| k.holds(u, v, &p)) {
+                removed_as_target += 1;
+                continue;
+            }
+            let key = p.coords.map(|c| (c / settings.voxel_m).floor() as i64);
+            let entry = voxels
+                .entry([key.x, key.y, key.z])
+                .or_insert((Vector3::zeros(), 0));
+            entry.0 += p.coords;
+            entry.1 += 1;
+        }
+    }
+    SensedCloud {
+        points: voxels
+            .values()
+            .map(|(sum, n)| (sum / *n as f64).into())
+            .collect(),
+        returns,
+        out_of_range,
+        removed_as_target,
+    }
+}
+
+impl KeepOut {
+    /// Whether the return at pixel `(u, v)`, point `p`, belongs to the target.
+    fn holds(&self, u: f64, v: f64, p: &Point3<f64>) -> bool {
+        let b = &self.target_box;
+        let in_box = u >= b[0] && u <= b[2] && v >= b[1] && v <= b[3];
+        in_box || (p.coords - Vector3::from(self.center)).norm() <= self.radius_m
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::perception::CameraModel;
+
+    /// A camera at the reference home pose and a depth image of a wall
+    /// `z` m along its axis (every pixel), `far` beyond it in the right half.
+    fn wall(z: f64, far: f64) -> (Camera, DepthImage) {
+        let model = CameraModel::default();
+        let camera = Camera::reference_home(&model).unwrap();
+        let k = model.intrinsics;
+        let metres: Vec<f64> = (0..k.height)
+            .flat_map(|_| (0..k.width).map(move |x| if x < k.width / 2 { z } else { far }))
+            .collect();
+        let depth = DepthImage::from_metres(k.width, k.height, 0.0005, &metres).unwrap();
+        (camera, depth)
+    }
+
+    #[test]
+    fn every_point_projects_back_onto_the_wall_it_came_from() {
+        let (camera, depth) = wall(0.4, 2.0);
+        let cloud = depth_cloud(&depth, &camera, &CloudSettings::default(), None);
+        let n = (depth.width() * depth.height()) as usize;
+        assert_eq!(cloud.returns, n);
+        assert_eq!(cloud.out_of_range, n / 2);
+        assert!(!cloud.points.is_empty());
+        for p in &cloud.points {
+            // Projection inverts back-projection: inside the left half of the
+            // image, at the wall's depth (a voxel mean moves by < a voxel).
+            let ([u, v], z) = camera.project(&Point3::from(*p)).unwrap();
+            assert!((z - 0.4).abs() < DEFAULT_VOXEL_M, "depth {z}");
+            assert!(
+                u >= -1.0 && u <= f64::from(depth.width()) / 2.0 + 1.0,
+                "u {u}"
+            );
+            assert!(v >= -1.0 && v <= f64::from(depth.height()) + 1.0, "v {v}");
+        }
+        // Downsampling: no two points share a voxel.
+        let keys: std::collections::BTreeSet<[i64; 3]> = cloud
+            .points
+            .iter()
+            .map(|p| p.map(|c| (c / DEFAULT_VOXEL_M).floor() as i64))
+            .collect();
+        assert!(
+            keys.len() * 10 > cloud.points.len() * 9,
+            "{} voxels",
+            keys.len()
+        );
+    }
+
+    #[test]
+    fn the_target_is_kept_out_by_its_box_and_its_ball() {
+        let (camera, depth) = wall(0.4, 0.4);
+        let k = CameraModel::default().intrinsics;
+        let (cx, cy) = (f64::from(k.width) / 2.0, f64::from(k.height) / 2.0);
+        let centre = camera.back_project(cx, cy, 0.4);
+        let keep_out = KeepOut {
+            target_box: [cx - 20.0, cy - 20.0, cx + 20.0, cy + 20.0],
+            center: centre.into(),
+            radius_m: 0.03,
+        };
+        let all = depth_cloud(&depth, &camera, &CloudSettings::default(), None);
+        let kept = depth_cloud(&depth, &camera, &CloudSettings::default(), Some(&keep_out));
+        assert!(kept.removed_as_target > 41 * 41);
+        assert!(kept.points.len() < all.points.len());
+        for p in &kept.points {
+            let ([u, v], _) = camera.project(&Point3::from(*p)).unwrap();
+            let inside = u > cx - 19.0 && u < cx + 19.0 && v > cy - 19.0 && v < cy + 19.0;
+            assert!(!inside, "a kept point at ({u}, {v}) is in the target box");
+            let d = (Vector3::from(*p) - centre.coords).norm();
+            assert!(
+                d > 0.03 - DEFAULT_VOXEL_M,
+                "a kept point {d} m from the target"
+            );
+        }
+        // Same input, same cloud.
+        assert_eq!(
+            kept,
+            depth_cloud(&depth, &camera, &CloudSettings::default(), Some(&keep_out))
+        );
+    }
+}
