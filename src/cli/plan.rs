@@ -138,10 +138,14 @@ pub fn run(args: PlanArgs) -> Result<()> {
         None => PlanRequest::new(flag_parts(&args)?, &flag_fields(&args))?,
     };
     let (model, robot) = load_model_and_robot(&args)?;
-    let task = request.task().clone();
+    // The plot needs the task's basis and duration after the request is spent.
+    let plot = args
+        .plot
+        .as_ref()
+        .map(|path| (path, request.task().clone()));
     let response = predict_and_optimize(&model, &robot, request, &Default::default())?;
-    if let Some(plot) = &args.plot {
-        plot_plan(plot, &task, &robot, &response)?;
+    if let Some((path, task)) = &plot {
+        plot_plan(path, task, &robot, &response)?;
     }
     crate::cli::print_json(&response)?;
     crate::cli::require_optimal(args.require_optimal, response.result.status)

@@ -148,17 +148,18 @@ fn tree_contact(
     prediction: f64,
 ) -> Option<PairContact> {
     let mut best: Option<PairContact> = None;
+    let mut limit = prediction;
     tree.visit(&shape.bounds, prediction, |i| {
-        let limit = best.map_or(prediction, |b| b.distance.min(prediction));
         let part = &obstacle.parts[i];
         if !ruled_out(shape.core.gap(&part.core), limit) {
             if let Some(c) = pair_contact(&shape.part, part, limit) {
                 if best.is_none_or(|b| c.distance < b.distance) {
+                    limit = c.distance.min(prediction);
                     best = Some(c);
                 }
             }
         }
-        best.map_or(prediction, |b| b.distance.min(prediction))
+        limit
     });
     best
 }
