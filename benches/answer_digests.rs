@@ -86,21 +86,15 @@ fn plan_digests(root: &Path, robot: Arc<Robot>) {
                 _ => None,
             };
             let task = dpmp::optim::Task {
-                obstacles: record.scene.obstacles,
+                obstacles: record.scene.obstacles(),
                 clearance_m: 0.02,
                 ..Default::default()
             };
+            let image = image::DynamicImage::ImageRgb8(out.images[0].clone());
             let parts = PlanParts {
-                image: image::DynamicImage::ImageRgb8(out.images[0].clone()),
-                target_box: record.bbox,
                 mask_applied: true,
                 depth,
-                depth_scale_m: None,
-                target_position: None,
-                goal_standoff_m: None,
-                approach: None,
-                camera: None,
-                task,
+                ..PlanParts::new(image, record.bbox, task)
             };
             let input = PlanRequest::new(parts, &PlanFields::json()).expect("plan request");
             let answer = match predict_and_optimize(&model, &robot, input, &Default::default()) {

@@ -122,7 +122,7 @@ fn plan(c: &mut Criterion) {
                 .expect("png");
             let record = out.records[0].clone();
             let task = dpmp::optim::Task {
-                obstacles: record.scene.obstacles,
+                obstacles: record.scene.obstacles(),
                 clearance_m: 0.02,
                 ..Default::default()
             };
@@ -136,16 +136,9 @@ fn plan(c: &mut Criterion) {
                 dpmp::perception::DepthImage::decode_png(depth, 0.001, "depth").expect("depth")
             });
             let parts = PlanParts {
-                image,
-                target_box: *bbox,
                 mask_applied: true,
                 depth,
-                depth_scale_m: None,
-                target_position: None,
-                goal_standoff_m: None,
-                approach: None,
-                camera: None,
-                task: task.clone(),
+                ..PlanParts::new(image, *bbox, task.clone())
             };
             let input = PlanRequest::new(parts, &PlanFields::json()).expect("plan request");
             black_box(

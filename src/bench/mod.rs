@@ -2,7 +2,8 @@
 //! seeded generator ([`make_problems`], drawing synthetic targets with
 //! [`synth_target`] and checking feasibility claims with [`witness`]), the compared methods
 //! ([`methods`]), the parallel runner ([`runner`]) and the reports
-//! ([`report`], [`plots`]). `dpmp bench` (src/cli/bench.rs) is a thin shell
+//! ([`report`], [`plots`]); [`world_eval`] checks plans made with and
+//! without a sensed world against a dataset's true scene. `dpmp bench` (src/cli/bench.rs) is a thin shell
 //! over [`run_suite`] and [`make_problems()`].
 
 pub mod hard_set;
@@ -16,6 +17,7 @@ pub mod runner;
 pub mod synth_target;
 pub mod typical_labels;
 pub mod witness;
+pub mod world_eval;
 
 pub use hard_set::{make_hard_set, HardSettings};
 pub use make_problems::{make_problems, MakeSettings};

@@ -72,7 +72,7 @@ pub fn target_problem(
         "prior": crate::optim::PriorSpec::from(&prediction.distribution),
         "promp": record.promp,
         "duration_s": record.duration_s,
-        "obstacles": record.scene.obstacles,
+        "obstacles": record.scene.obstacles(),
         "clearance_m": MODEL_CLEARANCE_M,
     });
     Ok(ProblemFile {

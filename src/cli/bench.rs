@@ -6,6 +6,9 @@
 //! - `dpmp bench make-problems --out problems/ [--seed S] [--per-category N]`
 //! - `dpmp bench make-problems --set hard --out problems/hard [--count N]`
 //! - `dpmp bench label-typical --out problems/typical/labels.json [--count N] [--restarts R]`
+//! - `dpmp bench world --data DIR [--split test] [--model DIR] [--out FILE]`:
+//!   plans with no world, the depth-sensed world and the true scene, each
+//!   checked against the true scene
 
 use crate::bench::{
     self, method_from_name, HardSettings, MakeSettings, RunSettings, DEFAULT_METHODS,
@@ -59,6 +62,30 @@ pub enum BenchCommand {
     MakeProblems(MakeArgs),
     /// Label the typical optimiser-benchmark problems with witnesses.
     LabelTypical(LabelArgs),
+    /// Plan a dataset's targets with no world, the world sensed from depth
+    /// and the true scene; check each plan against the true scene.
+    World(WorldArgs),
+}
+
+/// Arguments of `dpmp bench world`.
+#[derive(Debug, clap::Args)]
+pub struct WorldArgs {
+    /// Generated dataset with depth and intruders (`dpmp data generate
+    /// --intruders 1`).
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Dataset split (train, val, test or all).
+    #[arg(long, default_value = "test")]
+    pub split: String,
+    /// Trained model folder [default: the shipped model].
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// Write every plan's outcome and the table as JSON here.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// The robot (the one the model was trained for).
+    #[command(flatten)]
+    pub robot: super::RobotArgs,
 }
 
 /// Arguments of `dpmp bench label-typical`.
@@ -110,6 +137,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
     match args.command {
         Some(BenchCommand::MakeProblems(m)) => make(m),
         Some(BenchCommand::LabelTypical(l)) => label(l),
+        Some(BenchCommand::World(w)) => world(w),
         None => run_suite(args),
     }
 }
@@ -166,6 +194,22 @@ fn label(args: LabelArgs) -> Result<()> {
         args.count,
         args.out.display()
     );
+    Ok(())
+}
+
+fn world(args: WorldArgs) -> Result<()> {
+    let model = std::sync::Arc::new(crate::net::Model::load_or_shipped(args.model.as_deref())?);
+    let robot = std::sync::Arc::new(args.robot.load()?);
+    model.config().check_robot(&robot)?;
+    let eval = bench::world_eval::evaluate_worlds(&model, &robot, &args.data, &args.split, true)?;
+    if let Some(out) = &args.out {
+        crate::synth::dataset::write_json_atomic(out, &eval)?;
+    }
+    eprintln!(
+        "{} targets of split {:?} planned three ways ({} skipped: no depth or no intruder)",
+        eval.targets, eval.split, eval.skipped
+    );
+    print!("{}", bench::world_eval::markdown(&eval));
     Ok(())
 }
 

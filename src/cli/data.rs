@@ -89,6 +89,11 @@ pub struct GenerateArgs {
     /// Pre-grasp stop distance before the berry centre (m).
     #[arg(long)]
     pub standoff: Option<f64>,
+    /// Objects (unripe berries on stems, leaflets) placed across each
+    /// target's demonstrated path after its demonstrations, rendered and
+    /// marked `"intruder": true` in its scene (0..=3).
+    #[arg(long)]
+    pub intruders: Option<usize>,
     /// Replace an existing dataset in `--out`.
     #[arg(long)]
     pub overwrite: bool,
@@ -191,6 +196,9 @@ pub fn settings_from_args(a: &GenerateArgs) -> Result<SynthSettings> {
     }
     if let Some(d) = a.standoff {
         s.demos.standoff_m = d;
+    }
+    if let Some(n) = a.intruders {
+        s.intruders = n;
     }
     s.validate()?;
     Ok(s)

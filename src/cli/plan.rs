@@ -9,7 +9,9 @@ use crate::optim::task::DEFAULT_GOAL_TOLERANCE_M;
 use crate::optim::{Goal, GoalApproach, Task};
 use crate::perception::depth::{check_scale, DepthImage, DEFAULT_DEPTH_SCALE_M};
 use crate::perception::CameraModel;
-use crate::plan::{predict_and_optimize, PlanFields, PlanParts, PlanRequest, PlanResponse};
+use crate::plan::{
+    predict_and_optimize, PlanFields, PlanParts, PlanRequest, PlanResponse, WorldSource,
+};
 use crate::plot::{format_of, prior_and_answer, PriorBand};
 use crate::robot::Robot;
 use crate::scene::SceneFile;
@@ -64,6 +66,10 @@ pub struct PlanArgs {
         conflicts_with = "depth"
     )]
     pub target_position: Option<Vec<f64>>,
+    /// Where the world comes from besides the posted obstacles: `none`, or
+    /// `depth` (the cloud --depth sees, the target kept out) [default: none].
+    #[arg(long)]
+    pub world: Option<String>,
     /// Standoff of the pre-grasp goal short of the berry (m); default 0.1.
     #[arg(long)]
     pub goal_standoff: Option<f64>,
@@ -182,6 +188,7 @@ fn record_request(args: &PlanArgs, record: &Path) -> Result<PlanRequest> {
     apply_task_flags(args, &mut parts.task)?;
     parts.goal_standoff_m = args.goal_standoff;
     parts.approach = approach(args)?;
+    parts.world = world(args)?;
     PlanRequest::new(parts, &record_fields(&entry))
 }
 
@@ -217,8 +224,16 @@ fn flag_parts(args: &PlanArgs) -> Result<PlanParts> {
         goal_standoff_m: args.goal_standoff,
         approach: approach(args)?,
         camera,
+        world: world(args)?,
         task,
     })
+}
+
+/// `--world`, parsed.
+fn world(args: &PlanArgs) -> Result<WorldSource> {
+    args.world
+        .as_deref()
+        .map_or(Ok(WorldSource::None), |w| WorldSource::parse(w, "--world"))
 }
 
 /// The flags' names in errors, the images with their files.

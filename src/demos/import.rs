@@ -457,9 +457,12 @@ impl Context<'_> {
             target_depth_m: located.as_ref().map(|l| l.depth_m),
             bbox: t.bbox,
             center: [(t.bbox[0] + t.bbox[2]) / 2.0, (t.bbox[1] + t.bbox[3]) / 2.0],
-            scene: SceneFile {
-                obstacles: t.obstacles.clone(),
-            },
+            scene: crate::synth::dataset::RecordScene::new(
+                SceneFile {
+                    obstacles: t.obstacles.clone(),
+                },
+                Vec::new(),
+            ),
             target_obstacle_id: String::new(),
             target_position: None,
             start: prior.start,

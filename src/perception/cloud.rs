@@ -11,7 +11,6 @@
 use super::camera::Camera;
 use super::depth::DepthImage;
 use nalgebra::{Point3, Vector3};
-use std::collections::BTreeMap;
 
 /// Default voxel edge of the downsampled cloud (m).
 pub const DEFAULT_VOXEL_M: f64 = 0.005;
@@ -61,17 +60,29 @@ pub struct SensedCloud {
     pub out_of_range: usize,
     /// Returns removed as the target.
     pub removed_as_target: usize,
+    /// The deepest return kept (m along the optical axis; 0 when none).
+    pub max_depth_m: f64,
 }
 
+/// Voxel coordinates are packed into one `u64` key, 21 bits each, offset by
+/// half their range: ±2^20 voxels (±5 km at 5 mm) around the base.
+const KEY_BITS: u32 = 21;
+const KEY_OFFSET: i64 = 1 << (KEY_BITS - 1);
+
 /// The cloud of `depth` seen by `camera` (the pose it was taken from).
+///
+/// Each kept return is keyed by its voxel; the keys are sorted and each
+/// run of equal keys becomes one point (the mean of its returns), so the
+/// cost is one back-projection per pixel and one sort of the returns.
 pub fn depth_cloud(
     depth: &DepthImage,
     camera: &Camera,
     settings: &CloudSettings,
     keep_out: Option<&KeepOut>,
 ) -> SensedCloud {
-    let mut voxels: BTreeMap<[i64; 3], (Vector3<f64>, usize)> = BTreeMap::new();
+    let mut keyed: Vec<(u64, Vector3<f64>)> = Vec::new();
     let (mut returns, mut out_of_range, mut removed_as_target) = (0, 0, 0);
+    let mut max_depth_m: f64 = 0.0;
     for y in 0..depth.height() {
         for x in 0..depth.width() {
             let Some(z) = depth.metres(x, y) else {
@@ -88,23 +99,38 @@ pub fn depth_cloud(
                 removed_as_target += 1;
                 continue;
             }
-            let key = p.coords.map(|c| (c / settings.voxel_m).floor() as i64);
-            let entry = voxels
-                .entry([key.x, key.y, key.z])
-                .or_insert((Vector3::zeros(), 0));
-            entry.0 += p.coords;
-            entry.1 += 1;
+            max_depth_m = max_depth_m.max(z);
+            keyed.push((voxel_key(&p.coords, settings.voxel_m), p.coords));
         }
     }
+    keyed.sort_unstable_by_key(|(key, _)| *key);
     SensedCloud {
-        points: voxels
-            .values()
-            .map(|(sum, n)| (sum / *n as f64).into())
-            .collect(),
+        points: voxel_means(&keyed),
         returns,
         out_of_range,
         removed_as_target,
+        max_depth_m,
     }
+}
+
+/// The packed key of the voxel holding `p`.
+fn voxel_key(p: &Vector3<f64>, voxel_m: f64) -> u64 {
+    let mask = (1u64 << KEY_BITS) - 1;
+    p.iter().fold(0u64, |key, c| {
+        let cell = ((c / voxel_m).floor() as i64 + KEY_OFFSET).clamp(0, mask as i64) as u64;
+        (key << KEY_BITS) | cell
+    })
+}
+
+/// The mean point of each run of equal keys in `sorted`.
+fn voxel_means(sorted: &[(u64, Vector3<f64>)]) -> Vec<[f64; 3]> {
+    sorted
+        .chunk_by(|a, b| a.0 == b.0)
+        .map(|run| {
+            let sum: Vector3<f64> = run.iter().map(|(_, p)| p).sum();
+            (sum / run.len() as f64).into()
+        })
+        .collect()
 }
 
 impl KeepOut {

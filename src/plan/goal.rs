@@ -88,7 +88,7 @@ pub fn prior_towards_goal(
 
 /// A berry centre, its measured depth and where it came from.
 pub(super) struct Located {
-    position: [f64; 3],
+    pub(super) position: [f64; 3],
     depth_m: Option<f64>,
     /// Depth of the centre along the camera's optical axis: measured, or
     /// that of the client's position (what a depth-conditioned model reads).

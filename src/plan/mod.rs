@@ -29,6 +29,7 @@
 
 pub mod goal;
 pub mod request;
+pub mod world;
 
 pub use goal::{
     prior_towards_goal, TargetReport, TargetSource, DEFAULT_GOAL_STANDOFF_M, GOAL_PRIOR_STD_M,
@@ -38,6 +39,7 @@ pub use request::{
     check_target_box, check_target_position, PlanFields, PlanParts, PlanRequest, TargetInput,
     MAX_GOAL_STANDOFF_M, MIN_BOX_PX,
 };
+pub use world::{WorldReport, WorldSource};
 
 use crate::net::Model;
 use crate::optim::{optimize_prior, OptimizeResponse, SolveControl};
@@ -72,6 +74,9 @@ pub struct PlanResponse {
     /// The 3-D target, when depth or a target position was given.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub target: Option<TargetReport>,
+    /// The world sensed from depth, with `world: "depth"`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub world: Option<WorldReport>,
 }
 
 /// Network prior, goal from the target (if any), then the optimiser.
@@ -90,12 +95,34 @@ pub fn predict_and_optimize(
         goal_standoff_m,
         approach,
         camera,
+        world: source,
+        world_field,
         mut task,
         ..
     } = request;
     let camera = camera.unwrap_or_else(|| model.config().camera_model());
     let located = locate(&camera, robot, &target, &target_box)?;
     let depth_m = located.as_ref().map(|l| l.camera_depth_m);
+    let world = match (source, &located) {
+        (WorldSource::Depth, Some(l)) => {
+            let TargetInput::Depth(depth, _) = &target else {
+                return Err(Error::invalid(
+                    &world_field,
+                    "\"depth\" needs a depth image",
+                ));
+            };
+            let keep = world::TargetKeepOut {
+                target_box,
+                center: l.position,
+                depth_m: l.camera_depth_m,
+            };
+            let posed = crate::perception::Camera::at_home(&camera, robot)?;
+            let (sensed, report) = world::sensed_world(depth, &posed, &keep, &world_field)?;
+            task.obstacles.extend(sensed);
+            Some(report)
+        }
+        _ => None,
+    };
     let target = match located {
         Some(located) => {
             let report = goal_from_target(robot, located, goal_standoff_m)?;
@@ -132,6 +159,7 @@ pub fn predict_and_optimize(
         prior,
         model: model.name().to_string(),
         target,
+        world,
     })
 }
 

@@ -4,6 +4,7 @@
 //! HTTP route and the CLI cannot drift apart. [`PlanFields`] names the
 //! fields as each interface spells them.
 
+use super::world::{WorldSource, SENSED_OBSTACLE_ID};
 use crate::net::Model;
 use crate::optim::{GoalApproach, Task};
 use crate::perception::{CameraModel, DepthImage};
@@ -48,6 +49,8 @@ pub struct PlanFields {
     pub approach: String,
     /// The camera that took the images.
     pub camera: String,
+    /// Where the world comes from besides the posted obstacles.
+    pub world: String,
 }
 
 impl PlanFields {
@@ -63,6 +66,7 @@ impl PlanFields {
             goal_standoff: "goal_standoff_m".into(),
             approach: "goal.position".into(),
             camera: "camera".into(),
+            world: "world".into(),
         }
     }
 
@@ -88,6 +92,7 @@ impl PlanFields {
             goal_standoff: "--goal-standoff".into(),
             approach: "--approach-axis".into(),
             camera: "--camera".into(),
+            world: "--world".into(),
         }
     }
 }
@@ -115,8 +120,31 @@ pub struct PlanParts {
     pub approach: Option<GoalApproach>,
     /// The camera that took the images, when not the model's.
     pub camera: Option<CameraModel>,
+    /// Where the world comes from besides the posted obstacles.
+    pub world: WorldSource,
     /// What to plan besides the prior (scene, limits, start, goal, options).
     pub task: Task,
+}
+
+impl PlanParts {
+    /// The parts of a plan from `image` alone: the box, the task, and
+    /// nothing else (no mask, depth, 3-D target, camera or sensed world);
+    /// set the other fields with struct update syntax.
+    pub fn new(image: DynamicImage, target_box: [f64; 4], task: Task) -> PlanParts {
+        PlanParts {
+            image,
+            target_box,
+            mask_applied: false,
+            depth: None,
+            depth_scale_m: None,
+            target_position: None,
+            goal_standoff_m: None,
+            approach: None,
+            camera: None,
+            world: WorldSource::None,
+            task,
+        }
+    }
 }
 
 /// A validated plan request (only [`PlanRequest::new`] makes one).
@@ -130,6 +158,8 @@ pub struct PlanRequest {
     pub(super) goal_standoff_m: Option<f64>,
     pub(super) approach: Option<GoalApproach>,
     pub(super) camera: Option<CameraModel>,
+    pub(super) world: WorldSource,
+    pub(super) world_field: String,
     pub(super) task: Task,
 }
 
@@ -181,6 +211,27 @@ impl PlanRequest {
                 "an approach direction needs a goal: send goal.position, a depth image or a target position",
             ));
         }
+        if parts.world == WorldSource::Depth && !matches!(target, TargetInput::Depth(..)) {
+            return Err(Error::invalid(
+                &fields.world,
+                format!(
+                    "\"depth\" senses the world from the depth image: send {}",
+                    fields.depth
+                ),
+            ));
+        }
+        if parts.world == WorldSource::Depth
+            && parts
+                .task
+                .obstacles
+                .iter()
+                .any(|o| o.id == SENSED_OBSTACLE_ID)
+        {
+            return Err(Error::invalid(
+                &fields.world,
+                format!("the sensed cloud is the obstacle {SENSED_OBSTACLE_ID:?}: rename the posted one"),
+            ));
+        }
         if let Some(camera) = &parts.camera {
             camera.validate(&fields.camera)?;
         }
@@ -193,6 +244,8 @@ impl PlanRequest {
             goal_standoff_m: parts.goal_standoff_m,
             approach: parts.approach,
             camera: parts.camera,
+            world: parts.world,
+            world_field: fields.world.clone(),
             task: parts.task,
         })
     }
@@ -340,18 +393,11 @@ mod tests {
     use crate::optim::Goal;
 
     fn parts() -> PlanParts {
-        PlanParts {
-            image: DynamicImage::new_rgb8(64, 48),
-            target_box: [10.0, 10.0, 20.0, 20.0],
-            mask_applied: false,
-            depth: None,
-            depth_scale_m: None,
-            target_position: None,
-            goal_standoff_m: None,
-            approach: None,
-            camera: None,
-            task: Task::default(),
-        }
+        PlanParts::new(
+            DynamicImage::new_rgb8(64, 48),
+            [10.0, 10.0, 20.0, 20.0],
+            Task::default(),
+        )
     }
 
     fn depth(w: u32, h: u32) -> DepthImage {
@@ -443,6 +489,14 @@ mod tests {
                     ..parts()
                 },
                 ("goal.position", "--approach-axis"),
+            ),
+            (
+                PlanParts {
+                    world: WorldSource::Depth,
+                    target_position: position,
+                    ..parts()
+                },
+                ("world", "--world"),
             ),
         ];
         for (i, (p, (json, flag))) in cases.into_iter().enumerate() {

@@ -18,7 +18,7 @@ use crate::error::{ensure_finite, ensure_len};
 use crate::fsio::read_json;
 use crate::promp::annotation::JointAnnotation;
 use crate::promp::PrompConfig;
-use crate::scene::SceneFile;
+use crate::scene::{Obstacle, SceneFile};
 use crate::synth::camera::Intrinsics;
 use crate::synth::settings::SynthSettings;
 use crate::{Error, Result};
@@ -268,9 +268,10 @@ pub struct TargetRecord {
     pub bbox: [f64; 4],
     /// Box centre `[cx, cy]` (px).
     pub center: [f64; 2],
-    /// The whole configuration as obstacles (request schema).
+    /// The whole configuration as obstacles (request schema), with the
+    /// intruders placed after the demonstrations marked.
     #[serde(default)]
-    pub scene: SceneFile,
+    pub scene: RecordScene,
     /// Id of the target berry among the obstacles (generated data).
     #[serde(default)]
     pub target_obstacle_id: String,
@@ -490,4 +491,63 @@ pub fn write_png_atomic(path: &Path, img: &image::RgbImage) -> Result<()> {
     )
     .map_err(|e| Error::file(path, format!("cannot encode PNG: {e}")))?;
     write_atomic(path, &bytes)
+}
+
+/// The true scene of a record: every obstacle of the configuration, each
+/// marked `"intruder": true` when it was placed across the target's path
+/// after the demonstrations were made (`dpmp data generate --intruders`).
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct RecordScene {
+    /// The obstacles in the request schema, each with its intruder mark.
+    pub obstacles: Vec<SceneObstacle>,
+}
+
+/// One obstacle of a record's scene.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct SceneObstacle {
+    /// The obstacle (request schema).
+    #[serde(flatten)]
+    pub obstacle: Obstacle,
+    /// Placed after the demonstrations, which never met it.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub intruder: bool,
+}
+
+impl RecordScene {
+    /// A scene of `plant` obstacles and `intruders`, in that order.
+    pub fn new(plant: SceneFile, intruders: Vec<Obstacle>) -> RecordScene {
+        let mark = |intruder| move |obstacle| SceneObstacle { obstacle, intruder };
+        RecordScene {
+            obstacles: plant
+                .obstacles
+                .into_iter()
+                .map(mark(false))
+                .chain(intruders.into_iter().map(mark(true)))
+                .collect(),
+        }
+    }
+
+    /// Every obstacle, as a request takes them.
+    pub fn obstacles(&self) -> Vec<Obstacle> {
+        self.obstacles.iter().map(|o| o.obstacle.clone()).collect()
+    }
+
+    /// The obstacles the demonstrations met (all but the intruders).
+    pub fn plant(&self) -> Vec<Obstacle> {
+        self.marked(false)
+    }
+
+    /// The intruders.
+    pub fn intruders(&self) -> Vec<Obstacle> {
+        self.marked(true)
+    }
+
+    fn marked(&self, intruder: bool) -> Vec<Obstacle> {
+        self.obstacles
+            .iter()
+            .filter(|o| o.intruder == intruder)
+            .map(|o| o.obstacle.clone())
+            .collect()
+    }
 }

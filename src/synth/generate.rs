@@ -16,8 +16,11 @@ use crate::promp::{Basis, PrompConfig};
 use crate::robot::{IkOptions, IkTarget, Robot};
 use crate::scene::Scene;
 use crate::synth::camera::Camera;
-use crate::synth::dataset::{self, DistributionJson, Manifest, Splits, TargetEntry, TargetRecord};
+use crate::synth::dataset::{
+    self, DistributionJson, Manifest, RecordScene, Splits, TargetEntry, TargetRecord,
+};
 use crate::synth::demos::{approach_axis, DemoContext, TargetDemos};
+use crate::synth::intruders::{place_intruders, Intruder, TargetView};
 use crate::synth::obstacles::plant_scene_file;
 use crate::synth::plant::{sample_plant, Placement, Plant};
 use crate::synth::render::depth::measured_depth;
@@ -205,17 +208,20 @@ impl Generator {
                 &self.placement(),
                 &mut rng,
             )?;
-            match self.demos_for(&plant, &mut rng) {
-                Ok((scene_file, demos)) => {
+            let made = self
+                .demos_for(&plant, &mut rng)
+                .and_then(|(scene_file, demos)| {
                     let rngs = (&mut rng, &mut depth_rng(seed, config));
-                    let (records, images, depths) =
-                        self.finish(config, &plant, scene_file, demos, rngs)?;
+                    self.finish(config, &plant, scene_file, demos, rngs)
+                });
+            match made {
+                Ok((records, images, depths)) => {
                     return Ok(ConfigOutput {
                         records,
                         images,
                         depths,
                         attempts: attempt,
-                    });
+                    })
                 }
                 Err(Error::Infeasible(reason)) => last = reason,
                 Err(other) => return Err(other),
@@ -248,9 +254,10 @@ impl Generator {
         Ok((scene_file, demos))
     }
 
-    /// Render the plant once, then per berry: its box, the colour image
-    /// with sensor noise and the box painted, the depth image with its
-    /// error model and the target's measured depth, and the record.
+    /// Render the plant once (per target when it has intruders), then per
+    /// berry: its box, its intruders, the colour image with sensor noise and
+    /// the box painted, the depth image with its error model and the
+    /// target's measured depth, and the record.
     fn finish(
         &self,
         config: usize,
@@ -259,20 +266,64 @@ impl Generator {
         demos: Vec<TargetDemos>,
         (rng, depth_rng): (&mut ChaCha8Rng, &mut ChaCha8Rng),
     ) -> Result<RenderedTargets> {
-        let (base, exact_depth) = render_plant(plant, &self.camera, &self.settings.render, rng);
+        let render = &self.settings.render;
+        let shared = (self.settings.intruders == 0)
+            .then(|| render_plant(plant, &self.camera, render, &mut *rng));
         let mut out = (Vec::new(), Vec::new(), Vec::new());
         for (i, (berry, td)) in plant.berries.iter().zip(demos).enumerate() {
             let bbox = target_box(&self.camera, berry).ok_or_else(|| {
                 Error::Numerical(format!("berry {} is behind the camera", berry.id))
             })?;
-            let noise = self.settings.render.noise_std.sample(rng);
-            out.1.push(target_image(&base, &bbox, noise, rng));
-            let mut record = self.record(config, i, berry, bbox, scene.clone(), td);
-            let depth = self.measure_depth(&exact_depth, &bbox, depth_rng, &mut record)?;
+            let intruders = self.intruders_for(berry, bbox, &td, &mut *rng)?;
+            let own;
+            let (base, exact_depth) = match &shared {
+                Some((base, depth)) => (base, depth),
+                None => {
+                    let mut with = plant.clone();
+                    intruders.iter().for_each(|x| x.add_to(&mut with));
+                    own = render_plant(&with, &self.camera, render, &mut *rng);
+                    (&own.0, &own.1)
+                }
+            };
+            let noise = render.noise_std.sample(&mut *rng);
+            out.1.push(target_image(base, &bbox, noise, &mut *rng));
+            let intruder_obstacles = intruders.iter().flat_map(Intruder::obstacles).collect();
+            let record_scene = RecordScene::new(scene.clone(), intruder_obstacles);
+            let mut record = self.record(config, i, berry, bbox, record_scene, td);
+            let depth = self.measure_depth(exact_depth, &bbox, depth_rng, &mut record)?;
             out.2.push(depth);
             out.0.push(record);
         }
         Ok(out)
+    }
+
+    /// The intruders of one target ([`crate::synth::intruders`]); a target
+    /// where they find no place makes the configuration be drawn again.
+    fn intruders_for(
+        &self,
+        berry: &crate::synth::plant::Berry,
+        target_box: [f64; 4],
+        td: &TargetDemos,
+        rng: &mut ChaCha8Rng,
+    ) -> Result<Vec<Intruder>> {
+        let n = self.settings.intruders;
+        if n == 0 {
+            return Ok(Vec::new());
+        }
+        let mean = td.distribution.trajectory_mean(&self.basis);
+        let view = TargetView {
+            robot: &self.robot,
+            camera: &self.camera,
+            target: berry,
+            target_box,
+            mean: &mean,
+        };
+        place_intruders(&view, n, rng)?.ok_or_else(|| {
+            Error::Infeasible(format!(
+                "no place for {n} intruder(s) across the path to {}",
+                berry.id
+            ))
+        })
     }
 
     /// The depth image of one target and its measured depth (written into
@@ -304,7 +355,7 @@ impl Generator {
         index: usize,
         berry: &crate::synth::plant::Berry,
         bbox: [f64; 4],
-        scene: crate::scene::SceneFile,
+        scene: RecordScene,
         td: TargetDemos,
     ) -> TargetRecord {
         let entry = TargetEntry::new(config, index);

@@ -8,6 +8,7 @@
 //! - [`camera`] — the pinhole camera on the gripper (from [`crate::perception`]).
 //! - [`render`] — rasteriser, shading, textures, noise, the target box.
 //! - [`demos`] — IK-based, minimum-jerk, collision-checked demonstrations.
+//! - [`intruders`] — objects placed across a target's path after its demonstrations.
 //! - [`dataset`] — the on-disk format (`dpmp-dataset/2`, with depth; version 1 still loads) and its loaders.
 //! - [`generate`] — the deterministic parallel driver.
 //! - [`stats`] — dataset statistics beside the real annotation data.
@@ -26,6 +27,7 @@ pub use crate::perception::camera;
 pub mod dataset;
 pub mod demos;
 pub mod generate;
+pub mod intruders;
 pub mod obstacles;
 pub mod plant;
 pub mod render;

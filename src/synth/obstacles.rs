@@ -9,7 +9,7 @@
 
 use crate::geometry::{Capsule, OrientedBox};
 use crate::scene::{BerryShape, Obstacle, ObstacleShape, SceneFile};
-use crate::synth::plant::{Berry, Plant};
+use crate::synth::plant::{Berry, Leaflet, Plant, StemSegment};
 
 /// Rim points per leaflet hull (each on both faces of the slab).
 const LEAF_HULL_POINTS: usize = 8;
@@ -49,6 +49,28 @@ fn calyx_stem_radius(plant: &Plant, i: usize, b: &Berry) -> f64 {
         .map_or(0.1 * b.r_top, |s| s.radius)
 }
 
+/// A stem segment as a `capsule` obstacle.
+pub fn stem_obstacle(s: &StemSegment) -> Obstacle {
+    Obstacle {
+        id: s.id.clone(),
+        shape: ObstacleShape::Capsule(Capsule {
+            a: arr(&s.a),
+            b: arr(&s.b),
+            radius: s.radius,
+        }),
+    }
+}
+
+/// A leaflet as a thin `convex` slab.
+pub fn leaflet_obstacle(l: &Leaflet) -> Obstacle {
+    Obstacle {
+        id: l.id.clone(),
+        shape: ObstacleShape::Convex {
+            points: l.hull_points(LEAF_HULL_POINTS).iter().map(arr).collect(),
+        },
+    }
+}
+
 /// Every obstacle of the plant (berries first, in berry order).
 pub fn plant_obstacles(plant: &Plant) -> Vec<Obstacle> {
     let berries = plant
@@ -56,20 +78,8 @@ pub fn plant_obstacles(plant: &Plant) -> Vec<Obstacle> {
         .iter()
         .enumerate()
         .map(|(i, b)| berry_obstacle(b, calyx_stem_radius(plant, i, b)));
-    let stems = plant.stems.iter().map(|s| Obstacle {
-        id: s.id.clone(),
-        shape: ObstacleShape::Capsule(Capsule {
-            a: arr(&s.a),
-            b: arr(&s.b),
-            radius: s.radius,
-        }),
-    });
-    let leaves = plant.leaflets.iter().map(|l| Obstacle {
-        id: l.id.clone(),
-        shape: ObstacleShape::Convex {
-            points: l.hull_points(LEAF_HULL_POINTS).iter().map(arr).collect(),
-        },
-    });
+    let stems = plant.stems.iter().map(stem_obstacle);
+    let leaves = plant.leaflets.iter().map(leaflet_obstacle);
     let tray = plant.tray.iter().map(|t| Obstacle {
         id: "tray".to_string(),
         shape: ObstacleShape::Box(OrientedBox {

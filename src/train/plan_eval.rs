@@ -121,21 +121,15 @@ pub fn record_plan_input(
     let task = Task {
         duration_s: record.duration_s,
         start: Some(record.start.clone()),
-        obstacles: record.scene.obstacles.clone(),
+        obstacles: record.scene.obstacles(),
         clearance_m,
         ..Task::default()
     };
     let parts = PlanParts {
-        image,
-        target_box: record.bbox,
         mask_applied: entry.mask_applied,
         depth,
-        depth_scale_m: None,
-        target_position: None,
-        goal_standoff_m: None,
-        approach: None,
         camera: Some(camera),
-        task,
+        ..PlanParts::new(image, record.bbox, task)
     };
     Ok((parts, record))
 }

@@ -24,7 +24,7 @@ const CLEARANCE_M: f64 = 0.02;
 /// One generated target: JPEG bytes, its box and its scene's obstacles.
 fn generated_target() -> (Vec<u8>, [f64; 4], Value) {
     let (jpeg, _, record) = generated_target_with_depth();
-    let obstacles = serde_json::to_value(&record.scene.obstacles).unwrap();
+    let obstacles = serde_json::to_value(record.scene.obstacles()).unwrap();
     (jpeg, record.bbox, obstacles)
 }
 
@@ -181,7 +181,7 @@ fn depth_request(jpeg: &[u8], depth: &[u8], record: &TargetRecord) -> (Value, Va
     let fields = json!({
         "target_box": record.bbox,
         "mask_applied": true,
-        "obstacles": record.scene.obstacles,
+        "obstacles": record.scene.obstacles(),
         "clearance_m": CLEARANCE_M,
     });
     let mut body = fields.clone();
@@ -351,7 +351,7 @@ fn a_depth_conditioned_model_needs_depth() {
         "target_box": record.bbox,
         "mask_applied": true,
         "image_base64": b64(&jpeg),
-        "obstacles": record.scene.obstacles,
+        "obstacles": record.scene.obstacles(),
     });
     let (s, answer) = post_json(&c, &url, body.to_string());
     assert_eq!((s, field(&answer)), (422, Some("depth_base64")), "{answer}");

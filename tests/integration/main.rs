@@ -36,6 +36,7 @@ mod optim_properties;
 mod optim_requests;
 mod optim_task;
 mod plan_interfaces;
+mod plan_world;
 mod python_client;
 mod robot_cli;
 mod robot_collision_mesh;

@@ -26,7 +26,7 @@ fn the_cli_with_a_task_file_answers_as_the_http_route_does() {
     // Optimiser fields the CLI had no flag for: the start, the trajectory
     // format, the restarts, the joint-limit margin.
     let task = json!({
-        "obstacles": record.scene.obstacles,
+        "obstacles": record.scene.obstacles(),
         "clearance_m": 0.02,
         "duration_s": record.duration_s,
         "joint_limit_margin_rad": 0.01,

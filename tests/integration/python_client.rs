@@ -79,7 +79,7 @@ fn the_python_client_optimizes_plans_and_raises_the_servers_errors() {
             image.display().to_string(),
             depth.display().to_string(),
             serde_json::to_string(&record.bbox).unwrap(),
-            serde_json::to_string(&record.scene.obstacles).unwrap(),
+            serde_json::to_string(&record.scene.obstacles()).unwrap(),
         ])
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())

@@ -75,7 +75,7 @@ fn manifest_lists_only_existing_valid_files_and_splits_by_config() {
         assert_eq!(img.get_pixel(cx as u32, cy as u32).0, [255, 255, 255]);
         assert!(r
             .scene
-            .obstacles
+            .obstacles()
             .iter()
             .any(|o| o.id == r.target_obstacle_id));
         // The aligned depth image: same size, and the recorded target depth

@@ -5,7 +5,8 @@
 //! - `application/json`: `{"image_base64": "...", "target_box": [x1, y1, x2, y2],
 //!   "mask_applied": false, "depth_base64": "..." (optional 16-bit PNG),
 //!   "depth_scale_m": 0.001, "target_position": [x, y, z] (optional, instead
-//!   of depth), "goal_standoff_m": 0.1, ...scene and constraint fields of
+//!   of depth), "goal_standoff_m": 0.1, "world": "depth" (optional: the
+//!   depth image's cloud as an obstacle), ...scene and constraint fields of
 //!   /v1/optimize}`;
 //! - `multipart/form-data`: a part `image` (PNG or JPEG bytes), optionally a
 //!   part `depth` (16-bit PNG) and a part `request` (the same JSON without
@@ -24,7 +25,9 @@ use crate::optim::{GoalApproach, Task};
 use crate::perception::depth::check_scale;
 use crate::perception::depth::{DepthImage, DEFAULT_DEPTH_SCALE_M};
 use crate::perception::CameraModel;
-use crate::plan::{predict_and_optimize, PlanFields, PlanParts, PlanRequest, PlanResponse};
+use crate::plan::{
+    predict_and_optimize, PlanFields, PlanParts, PlanRequest, PlanResponse, WorldSource,
+};
 use crate::service::config::ServiceConfig;
 use crate::service::error::ApiError;
 use crate::service::extract::{
@@ -55,6 +58,7 @@ const SCALE_FIELD: &str = "depth_scale_m";
 const TARGET_FIELD: &str = "target_position";
 const STANDOFF_FIELD: &str = "goal_standoff_m";
 const CAMERA_FIELD: &str = "camera";
+const WORLD_FIELD: &str = "world";
 
 /// A request as received, nothing parsed or decoded yet: that is CPU work
 /// and runs in the request's job.
@@ -267,6 +271,7 @@ fn finish_input(
     let goal_standoff_m = optional_number(&mut fields, STANDOFF_FIELD)?;
     let approach = goal_approach(&mut fields)?;
     let camera = take_camera(&mut fields)?;
+    let world = take_world(&mut fields)?;
     let task: Task = from_value(Value::Object(fields))?;
     let (image_field, image_bytes) = &encoded.image;
     let max_pixels = decoding.config.max_image_pixels;
@@ -301,6 +306,7 @@ fn finish_input(
         goal_standoff_m,
         approach,
         camera,
+        world,
         task,
     };
     Ok((PlanRequest::new(parts, &names)?, held))
@@ -319,6 +325,18 @@ fn take_camera(fields: &mut Map<String, Value>) -> Result<Option<CameraModel>, A
         )
     })?;
     Ok(Some(camera))
+}
+
+/// The optional `world` (`"none"` or `"depth"`).
+fn take_world(fields: &mut Map<String, Value>) -> Result<WorldSource, ApiError> {
+    match fields.remove(WORLD_FIELD) {
+        None => Ok(WorldSource::None),
+        Some(Value::String(w)) => Ok(WorldSource::parse(&w, WORLD_FIELD)?),
+        Some(_) => Err(ApiError::invalid(
+            WORLD_FIELD,
+            "must be the string \"none\" or \"depth\"",
+        )),
+    }
 }
 
 /// A `goal` without a `position` (only with a derived goal): its approach

@@ -502,7 +502,18 @@ pub struct SynthSettings {
     pub demos: DemoSettings,
     /// Dataset split.
     pub split: SplitSettings,
+    /// Intruders per target, placed across its demonstrated mean path after
+    /// the demonstrations (0..=3; [`crate::synth::intruders`]).
+    #[serde(skip_serializing_if = "is_zero")]
+    pub intruders: usize,
 }
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
+}
+
+/// Most intruders per target.
+pub const MAX_INTRUDERS: usize = 3;
 
 impl SynthSettings {
     /// Defaults with `configs` x `berries_per_config` targets.
@@ -530,6 +541,12 @@ impl SynthSettings {
                     "must be in 1..=20 (the issue asks for 3-8), got {}",
                     self.berries_per_config
                 ),
+            ));
+        }
+        if self.intruders > MAX_INTRUDERS {
+            return Err(Error::invalid(
+                "intruders",
+                format!("must be in 0..={MAX_INTRUDERS}, got {}", self.intruders),
             ));
         }
         self.plant.validate()?;

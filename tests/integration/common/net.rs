@@ -100,7 +100,7 @@ pub fn write_dataset(
                 target_depth_m: None,
                 bbox: bx,
                 center: [(bx[0] + bx[2]) / 2.0, (bx[1] + bx[3]) / 2.0],
-                scene: dpmp::scene::SceneFile { obstacles: vec![] },
+                scene: dpmp::synth::dataset::RecordScene::default(),
                 target_obstacle_id: format!("berry-{b}"),
                 target_position: Some([0.65, 0.0, 0.7]),
                 start: vec![0.0; N_JOINTS],
