@@ -378,8 +378,13 @@ impl Check<'_> {
                 ),
             ));
         }
-        for (i, p) in points.iter().enumerate() {
-            self.finite(&format!("points[{i}]"), p)?;
+        let valid = |p: &[f64; 3]| {
+            p.iter()
+                .all(|v| v.is_finite() && v.abs() <= MAX_COORDINATE_M)
+        };
+        // The field name is formatted only for the first bad point.
+        if let Some(i) = points.iter().position(|p| !valid(p)) {
+            self.finite(&format!("points[{i}]"), &points[i])?;
         }
         self.positive("radius", radius)
     }

@@ -42,39 +42,48 @@ impl PartTree {
         if bounds.is_empty() {
             return None;
         }
+        // The split works on a contiguous array of (box centre, part), so
+        // the median selections touch no other memory.
+        let mut items: Vec<([f64; 3], usize)> = bounds
+            .iter()
+            .enumerate()
+            .map(|(i, b)| ((b.min + b.max).into(), i))
+            .collect();
         let mut tree = PartTree {
             nodes: Vec::with_capacity(2 * bounds.len() / LEAF_PARTS + 1),
-            order: (0..bounds.len()).collect(),
+            order: Vec::new(),
         };
-        tree.build(bounds, 0, bounds.len());
+        tree.build(bounds, &mut items, 0);
+        tree.order = items.iter().map(|&(_, i)| i).collect();
         Some(tree)
     }
 
-    /// Build the node over `order[start..end]`; returns its index.
-    fn build(&mut self, bounds: &[Bounds], start: usize, end: usize) -> usize {
-        let node_bounds = self.order[start..end]
-            .iter()
-            .map(|&i| bounds[i])
-            .reduce(|a, b| a.merged(&b))
-            .unwrap_or(bounds[self.order[start]]);
+    /// Build the node over `items` (which start at `start` in the final
+    /// order); returns its index. A node's box is its children's merged.
+    fn build(&mut self, bounds: &[Bounds], items: &mut [([f64; 3], usize)], start: usize) -> usize {
         let index = self.nodes.len();
         self.nodes.push(Node {
-            bounds: node_bounds,
+            bounds: bounds[items[0].1],
             start,
-            end,
+            end: start + items.len(),
             children: None,
         });
-        if end - start > LEAF_PARTS {
-            let extent = node_bounds.max - node_bounds.min;
-            let axis = extent.imax();
-            let centre = |i: usize| bounds[i].min[axis] + bounds[i].max[axis];
-            let mid = start + (end - start) / 2;
-            self.order[start..end]
-                .select_nth_unstable_by(mid - start, |&a, &b| centre(a).total_cmp(&centre(b)));
-            let left = self.build(bounds, start, mid);
-            let right = self.build(bounds, mid, end);
-            self.nodes[index].children = Some((left, right));
+        if items.len() <= LEAF_PARTS {
+            self.nodes[index].bounds = items
+                .iter()
+                .map(|&(_, i)| bounds[i])
+                .reduce(|a, b| a.merged(&b))
+                .unwrap_or(bounds[items[0].1]);
+            return index;
         }
+        let axis = longest_axis(items);
+        let mid = items.len() / 2;
+        items.select_nth_unstable_by(mid, |a, b| a.0[axis].total_cmp(&b.0[axis]));
+        let (low, high) = items.split_at_mut(mid);
+        let left = self.build(bounds, low, start);
+        let right = self.build(bounds, high, start + mid);
+        self.nodes[index].bounds = self.nodes[left].bounds.merged(&self.nodes[right].bounds);
+        self.nodes[index].children = Some((left, right));
         index
     }
 
@@ -109,6 +118,20 @@ impl PartTree {
             }
         }
     }
+}
+
+/// The axis along which the box centres of `items` spread most.
+fn longest_axis(items: &[([f64; 3], usize)]) -> usize {
+    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+    for (c, _) in items {
+        for k in 0..3 {
+            lo[k] = lo[k].min(c[k]);
+            hi[k] = hi[k].max(c[k]);
+        }
+    }
+    (0..3)
+        .max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b])))
+        .unwrap_or(0)
 }
 
 #[cfg(test)]

@@ -290,6 +290,46 @@ fn bad_requests_get_the_documented_4xx() {
         json!({"prior": {"mean": [1.0], "cov": [[1.0]]}, "bogus": 1}).to_string(),
     );
     assert_eq!(s, 422, "{body}");
+    // Point clouds: NaN, empty, wrong shape, a broken compact form, too many.
+    let cloud = |shape: Value| {
+        let mut request = typical_request(2);
+        let mut o = json!({"id": "cloud", "type": "points", "radius": 0.005});
+        for (k, v) in shape.as_object().unwrap() {
+            o[k] = v.clone();
+        }
+        request["obstacles"] = json!([o]);
+        let (s, body) = post_json(&c, &url, request.to_string());
+        (s, field(&body).map(str::to_string), body)
+    };
+    for (shape, expected) in [
+        (json!({"points": [[0.5, 0.0, "NaN"]]}), "obstacles[0]"),
+        (json!({"points": []}), "obstacles[0].points"),
+        (json!({"points": [[0.5, 0.0]]}), "obstacles[0]"),
+        (
+            json!({"points": [[0.5, 0.0, 0.5]], "radius": -1.0}),
+            "obstacles[0].radius",
+        ),
+        (json!({"points_base64": "AAAA"}), "obstacles[0]"),
+    ] {
+        let (s, f, body) = cloud(shape.clone());
+        assert_eq!(s, 422, "{shape}: {body}");
+        assert!(
+            f.as_deref().is_some_and(|f| f.starts_with(expected)),
+            "{shape}: {body}"
+        );
+    }
+    // Beyond the per-obstacle cap (the body limit is raised for it).
+    let big_server = start(test_config().with_body_limit(8 << 20));
+    let many = vec![[0.5, 0.0, 0.5]; dpmp::scene::obstacle::MAX_CLOUD_POINTS + 1];
+    let mut request = typical_request(2);
+    request["obstacles"] =
+        json!([{"id": "cloud", "type": "points", "points": many, "radius": 0.005}]);
+    let (s, body) = post_json(&c, &big_server.url("/v1/optimize"), request.to_string());
+    assert_eq!(s, 422, "{body}");
+    assert!(
+        field(&body).is_some_and(|f| f.starts_with("obstacles")),
+        "{body}"
+    );
 }
 
 #[test]
