@@ -1,6 +1,6 @@
 """A small client for the dPMP trajectory service (standard library only).
 
-    from dpmp_client import Client, DpmpError
+    from dpmp_client import Client, DpmpError, points_obstacle
 
     dpmp = Client("http://127.0.0.1:8080")            # token=... when the service has one
     answer = dpmp.optimize(request)                    # the /v1/optimize request as a dict
@@ -8,6 +8,11 @@
                      depth_path="plant_depth.png", mask_applied=True,
                      obstacles=[...], clearance_m=0.02)
     print(plan["status"], plan["target"]["goal"], len(plan["trajectory"]["points"]))
+    # The world the depth image sees, plus a cloud of your own:
+    cloud = points_obstacle("shelf", [[0.9, 0.3, 0.2], [0.9, 0.32, 0.2]], 0.01)
+    plan = dpmp.plan("plant.png", [392.1, 80.0, 424.4, 122.8], depth_path="plant_depth.png", world="depth",
+                     obstacles=[cloud], clearance_m=0.015)
+    print(plan["world"]["points"], plan["world"]["note"])
 
 Every answer is the service's JSON as a dict (see api/openapi.yaml). A
 refused request raises DpmpError with the server's `code`, `message` and
@@ -16,10 +21,11 @@ refused request raises DpmpError with the server's `code`, `message` and
 
 import base64
 import json
+import struct
 import urllib.error
 import urllib.request
 
-__all__ = ["Client", "DpmpError", "optimize", "plan"]
+__all__ = ["Client", "DpmpError", "optimize", "plan", "points_obstacle"]
 
 DEFAULT_URL = "http://127.0.0.1:8080"
 
@@ -113,6 +119,19 @@ def _error_of(http_error):
 def _file_base64(path):
     with open(path, "rb") as f:
         return base64.b64encode(f.read()).decode("ascii")
+
+
+def points_obstacle(obstacle_id, points, radius):
+    """A `points` obstacle (a cloud: a ball of `radius` m around each of
+    `points`, [[x, y, z], ...] in the base frame) in the compact form the
+    service takes: `points_base64`, little-endian float32 triples."""
+    packed = b"".join(struct.pack("<fff", *map(float, p)) for p in points)
+    return {
+        "id": obstacle_id,
+        "type": "points",
+        "points_base64": base64.b64encode(packed).decode("ascii"),
+        "radius": float(radius),
+    }
 
 
 def optimize(request, base_url=DEFAULT_URL, token=None):

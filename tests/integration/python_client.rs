@@ -17,7 +17,7 @@ use std::process::{Command, Stdio};
 const CHECK: &str = r#"
 import json, sys
 sys.path.insert(0, sys.argv[1])
-from dpmp_client import Client, DpmpError
+from dpmp_client import Client, DpmpError, points_obstacle
 url, request_path, image, depth, box = sys.argv[2], sys.argv[3], sys.argv[4], sys.argv[5], json.loads(sys.argv[6])
 scene = json.loads(sys.argv[7])
 dpmp = Client(url)
@@ -30,6 +30,11 @@ plan = dpmp.plan(image, box, depth_path=depth, mask_applied=True, obstacles=scen
 out["plan_status"] = plan["status"]
 out["plan_target_source"] = plan["target"]["source"]
 out["plan_final"] = plan["trajectory"]["points"][-1]["positions"]
+shelf = points_obstacle("shelf", [[0.9, 0.3, 0.2], [0.9, 0.32, 0.2], [0.92, 0.3, 0.2]], 0.01)
+sensed = dpmp.plan(image, box, depth_path=depth, mask_applied=True, world="depth",
+                   obstacles=[shelf], clearance_m=0.015)
+out["world_points"] = sensed["world"]["points"]
+out["world_status"] = sensed["status"]
 try:
     dpmp.plan(image, [600, 400, 700, 500], depth_path=depth)
     out["refused"] = None
@@ -105,6 +110,9 @@ fn the_python_client_optimizes_plans_and_raises_the_servers_errors() {
     assert_eq!(seen["optimize_points"], 150);
     assert_eq!(seen["plan_target_source"], "depth");
     assert_eq!(seen["plan_status"], "optimal", "{seen}");
+    // A compact cloud from the client and the depth world beside it.
+    assert!(seen["world_points"].as_u64().unwrap() > 200, "{seen}");
+    assert!(seen["world_status"].is_string(), "{seen}");
     let last: Vec<f64> = serde_json::from_value(seen["plan_final"].clone()).unwrap();
     let tcp = robot.tcp_pose(&last).translation.vector;
     let demos = nalgebra::Vector3::from(record.final_tcp.position);
