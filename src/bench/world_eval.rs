@@ -15,10 +15,10 @@
 //! every true obstacle. Targets run one after another, so the plan times
 //! are those of a single request.
 
+use super::report::Percentiles;
 use crate::net::Model;
 use crate::optim::Status;
-use crate::perception::CameraModel;
-use crate::plan::{predict_and_optimize, PlanRequest, WorldSource};
+use crate::plan::{predict_and_optimize, PlanParts, PlanRequest, WorldSource};
 use crate::promp::Basis;
 use crate::robot::Robot;
 use crate::scene::{Obstacle, Scene};
@@ -137,21 +137,19 @@ pub fn evaluate_worlds(
     let (mut outcomes, mut skipped) = (Vec::new(), 0);
     for entry in &entries {
         bar.inc(1);
-        let record = dataset::load_record(dir, entry)?;
-        if entry.depth.is_none() || record.scene.intruders().is_empty() {
+        let (parts, record) = record_plan_input(dir, entry, scale, camera, ASKED_CLEARANCE_M)?;
+        if parts.depth.is_none() || record.scene.intruders().is_empty() {
             skipped += 1;
             continue;
         }
         let truth = Scene::new(record.scene.obstacles())?;
         for world in WorldGiven::ALL {
-            let plan = PlanInput {
-                dir,
+            let target = Target {
                 entry,
+                parts: parts.clone(),
                 record: &record,
-                camera,
-                scale,
             };
-            outcomes.push(plan_one(model, robot, &plan, world, &truth, &check)?);
+            outcomes.push(plan_one(model, robot, target, world, &truth, &check)?);
         }
     }
     bar.finish_and_clear();
@@ -165,43 +163,40 @@ pub fn evaluate_worlds(
     })
 }
 
-/// Where one target's inputs come from.
-struct PlanInput<'a> {
-    dir: &'a Path,
+/// One target's plan inputs (the record's, as `dpmp plan --record` reads
+/// them) and its record.
+struct Target<'a> {
     entry: &'a TargetEntry,
+    parts: PlanParts,
     record: &'a TargetRecord,
-    camera: CameraModel,
-    scale: f64,
 }
 
 fn plan_one(
     model: &Arc<Model>,
     robot: &Arc<Robot>,
-    input: &PlanInput,
+    target: Target,
     world: WorldGiven,
     truth: &Scene,
     check: &Checker,
 ) -> Result<WorldOutcome> {
-    let (mut parts, _) = record_plan_input(
-        input.dir,
-        input.entry,
-        input.scale,
-        input.camera,
-        ASKED_CLEARANCE_M,
-    )?;
+    let Target {
+        entry,
+        mut parts,
+        record,
+    } = target;
     parts.task.obstacles = match world {
-        WorldGiven::Oracle => input.record.scene.obstacles(),
+        WorldGiven::Oracle => record.scene.obstacles(),
         WorldGiven::None | WorldGiven::Depth => Vec::<Obstacle>::new(),
     };
     if world == WorldGiven::Depth {
         parts.world = WorldSource::Depth;
     }
-    let request = PlanRequest::new(parts, &record_fields(input.entry))?;
+    let request = PlanRequest::new(parts, &record_fields(entry))?;
     let started = Instant::now();
     let answer = predict_and_optimize(model, robot, request, &Default::default())?;
     let plan_ms = started.elapsed().as_secs_f64() * 1e3;
     Ok(WorldOutcome {
-        target: input.entry.id.clone(),
+        target: entry.id.clone(),
         world,
         status: answer.result.status,
         true_clearance_m: check.true_clearance(truth, &answer.result.weights)?,
@@ -252,8 +247,8 @@ fn row(world: WorldGiven, outcomes: &[WorldOutcome]) -> WorldRow {
     let mine: Vec<&WorldOutcome> = outcomes.iter().filter(|o| o.world == world).collect();
     let n = mine.len().max(1) as f64;
     let share = |f: &dyn Fn(&WorldOutcome) -> bool| mine.iter().filter(|o| f(o)).count() as f64 / n;
-    let mut times: Vec<f64> = mine.iter().map(|o| o.plan_ms).collect();
-    let mut points: Vec<f64> = mine
+    let times = Percentiles::of(&mine.iter().map(|o| o.plan_ms).collect::<Vec<_>>());
+    let points: Vec<f64> = mine
         .iter()
         .filter_map(|o| o.sensed_points.map(|p| p as f64))
         .collect();
@@ -266,19 +261,10 @@ fn row(world: WorldGiven, outcomes: &[WorldOutcome]) -> WorldRow {
             .iter()
             .map(|o| o.true_clearance_m)
             .fold(f64::INFINITY, f64::min),
-        plan_ms_p50: quantile(&mut times, 0.5),
-        plan_ms_p95: quantile(&mut times, 0.95),
-        sensed_points_p50: (!points.is_empty()).then(|| quantile(&mut points, 0.5)),
+        plan_ms_p50: times.p50,
+        plan_ms_p95: times.p95,
+        sensed_points_p50: (!points.is_empty()).then(|| Percentiles::of(&points).p50),
     }
-}
-
-/// The `p` quantile (nearest rank) of `values` (0 when empty).
-fn quantile(values: &mut [f64], p: f64) -> f64 {
-    if values.is_empty() {
-        return 0.0;
-    }
-    values.sort_by(f64::total_cmp);
-    values[((values.len() - 1) as f64 * p).round() as usize]
 }
 
 /// The table as Markdown.
@@ -300,17 +286,4 @@ pub fn markdown(eval: &WorldEval) -> String {
         );
     }
     out
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn quantiles_use_the_nearest_rank() {
-        let mut v = vec![4.0, 1.0, 3.0, 2.0, 5.0];
-        assert_eq!(quantile(&mut v, 0.5), 3.0);
-        assert_eq!(quantile(&mut v, 0.95), 5.0);
-        assert_eq!(quantile(&mut [], 0.5), 0.0);
-    }
 }

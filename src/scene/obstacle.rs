@@ -39,6 +39,11 @@ pub const MAX_CLOUD_POINTS: usize = 100_000;
 /// and still a normal single-precision number for the narrow phase.
 pub const MIN_SIZE_M: f64 = 1e-9;
 
+/// A finite coordinate within ±[`MAX_COORDINATE_M`].
+fn valid_coordinate(v: f64) -> bool {
+    v.is_finite() && v.abs() <= MAX_COORDINATE_M
+}
+
 /// One named obstacle.
 #[derive(Clone, Debug, Serialize, PartialEq)]
 pub struct Obstacle {
@@ -279,10 +284,7 @@ impl Check<'_> {
     /// Every value a coordinate within ±[`MAX_COORDINATE_M`]; the first
     /// that is not is named `field[i]`.
     fn finite(&self, field: &str, values: &[f64]) -> Result<()> {
-        match values
-            .iter()
-            .position(|v| !(v.is_finite() && v.abs() <= MAX_COORDINATE_M))
-        {
+        match values.iter().position(|&v| !valid_coordinate(v)) {
             None => Ok(()),
             Some(i) => Err(self.fail(
                 &format!("{field}[{i}]"),
@@ -378,12 +380,11 @@ impl Check<'_> {
                 ),
             ));
         }
-        let valid = |p: &[f64; 3]| {
-            p.iter()
-                .all(|v| v.is_finite() && v.abs() <= MAX_COORDINATE_M)
-        };
         // The field name is formatted only for the first bad point.
-        if let Some(i) = points.iter().position(|p| !valid(p)) {
+        if let Some(i) = points
+            .iter()
+            .position(|p| !p.iter().copied().all(valid_coordinate))
+        {
             self.finite(&format!("points[{i}]"), &points[i])?;
         }
         self.positive("radius", radius)

@@ -95,24 +95,8 @@ fn cloud_obstacle(points: &[[f64; 3]], radius: f64) -> CompiledObstacle {
     let tree = (boxes.len() > TREE_MIN_PARTS)
         .then(|| PartTree::new(&boxes))
         .flatten();
-    // Every ball has the same radius: one parry shape, shared.
-    let parts = match balls.first().map(primitive_part) {
-        Some(first) => balls
-            .iter()
-            .map(|ball| {
-                let pose = local_primitive(ball).1;
-                Part {
-                    shape: first.shape.clone(),
-                    pose,
-                    core: Core::of_primitive(ball),
-                    long: None,
-                }
-            })
-            .collect(),
-        None => Vec::new(),
-    };
     CompiledObstacle {
-        parts,
+        parts: balls.iter().map(primitive_part).collect(),
         bounds,
         tree,
     }
