@@ -1,9 +1,12 @@
 //! `dpmp data`: generate a synthetic dataset, print its statistics, or
 //! render a preview of one plant configuration.
 
+use crate::perception::{Camera, DepthImage};
+use crate::plan::world::{sensed_cloud, TargetKeepOut};
+use crate::plot::{scene_picture, ScenePicture};
 use crate::promp::annotation::load_dir;
 use crate::robot::Robot;
-use crate::synth::dataset::{load_manifest, load_record, write_png_atomic};
+use crate::synth::dataset::{load_manifest, load_record, write_png_atomic, TargetRecord};
 use crate::synth::generate::{check_output_dir, generate, GenerateOptions, Generator};
 use crate::synth::settings::{RegionAnchor, SynthSettings};
 use crate::synth::stats::{
@@ -19,7 +22,8 @@ pub enum DataCommand {
     Generate(GenerateArgs),
     /// Print a dataset's statistics, optionally beside the real annotation data.
     Stats(StatsArgs),
-    /// Render the images of one configuration to PNG files (no dataset).
+    /// Render the images of one configuration to PNG files, and per target
+    /// its true scene under the cloud sensed from its depth (no dataset).
     Preview(PreviewArgs),
     /// Write a trainable dataset from your own images, boxes, depth and
     /// demonstrations (a JSON manifest; see the README).
@@ -124,7 +128,9 @@ pub struct StatsArgs {
 /// Flags of `dpmp data preview`.
 #[derive(Debug, clap::Args)]
 pub struct PreviewArgs {
-    /// Output directory for `c<config>_b<berry>.png`.
+    /// Output directory for `c<config>_b<berry>.png` and, per target, the
+    /// picture of its true scene and the cloud `world: depth` senses from
+    /// its depth image, `c<config>_b<berry>.world.png`.
     #[arg(long)]
     pub out: PathBuf,
     /// Berries in the configuration.
@@ -136,6 +142,11 @@ pub struct PreviewArgs {
     /// Seed.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Objects (unripe berries on stems, leaflets) placed across each
+    /// target's demonstrated path after its demonstrations, rendered and
+    /// drawn as intruders in the world pictures (0..=3).
+    #[arg(long, default_value_t = 0)]
+    pub intruders: usize,
     /// The robot.
     #[command(flatten)]
     pub robot: super::RobotArgs,
@@ -283,14 +294,64 @@ fn run_stats(a: StatsArgs) -> Result<()> {
 }
 
 fn run_preview(a: PreviewArgs) -> Result<()> {
-    let settings = SynthSettings::new(1, a.berries);
+    let mut settings = SynthSettings::new(1, a.berries);
+    settings.intruders = a.intruders;
     let generator = Generator::new(settings, a.robot.load()?)?;
     let output = generator.config(a.seed, a.config)?;
     std::fs::create_dir_all(&a.out).map_err(|e| Error::write(&a.out, e.to_string()))?;
-    for (record, image) in output.records.iter().zip(&output.images) {
+    let targets = output
+        .records
+        .iter()
+        .zip(&output.images)
+        .zip(&output.depths);
+    for ((record, image), depth) in targets {
         let path = a.out.join(format!("{}.png", record.id));
         write_png_atomic(&path, image)?;
         crate::cli::write_stdout(&path.display().to_string())?;
+        let Some(depth) = depth else {
+            continue;
+        };
+        // The target located as a plan with this depth image locates it.
+        let camera = generator.camera();
+        let keep = match TargetKeepOut::locate(depth, record.bbox, camera, "depth") {
+            Ok(keep) => keep,
+            Err(e) => {
+                // A plan would refuse this target too; the other pictures stand.
+                eprintln!("warning: {}: no world picture: {e}", record.id);
+                continue;
+            }
+        };
+        let path = a.out.join(format!("{}.world.png", record.id));
+        world_picture(&path, record, depth, camera, &keep)?;
+        crate::cli::write_stdout(&path.display().to_string())?;
     }
     Ok(())
+}
+
+/// The picture of `record`'s true scene (intruders marked) under the cloud
+/// a plan with `world: "depth"` senses from `depth` through `camera` (the
+/// generator's, at home), with the located target `keep` kept out.
+fn world_picture(
+    path: &Path,
+    record: &TargetRecord,
+    depth: &DepthImage,
+    camera: &Camera,
+    keep: &TargetKeepOut,
+) -> Result<()> {
+    let cloud = sensed_cloud(depth, camera, keep);
+    let obstacles = record.scene.obstacles();
+    let intruder: Vec<bool> = record.scene.obstacles.iter().map(|o| o.intruder).collect();
+    let picture = ScenePicture {
+        title: format!(
+            "{}: true scene and the cloud sensed from depth (world: depth)",
+            record.id
+        ),
+        scene_label: "true scene".to_string(),
+        obstacles: &obstacles,
+        intruder: &intruder,
+        cloud: &cloud.points,
+        tcp_path: None,
+        target: Some(keep.center),
+    };
+    scene_picture(path, &picture)
 }

@@ -12,7 +12,7 @@ use crate::perception::CameraModel;
 use crate::plan::{
     predict_and_optimize, PlanFields, PlanParts, PlanRequest, PlanResponse, WorldSource,
 };
-use crate::plot::{format_of, prior_and_answer, PriorBand};
+use crate::plot::{format_of, prior_and_answer, scene_picture, PriorBand, ScenePicture};
 use crate::robot::Robot;
 use crate::scene::SceneFile;
 use crate::train::plan_eval::{find_record, record_fields, record_plan_input};
@@ -107,7 +107,9 @@ pub struct PlanArgs {
     #[arg(long)]
     pub trajectory_format: Option<String>,
     /// Draw the prior ±2σ band, its mean and the planned trajectory per
-    /// joint into this `.png` or `.svg` file.
+    /// joint into this `.png` or `.svg` file; with `--world depth` also the
+    /// posted obstacles, the sensed cloud, the TCP path and the target, top
+    /// and side view, into its sibling `<stem>.world.<ext>`.
     #[arg(long)]
     pub plot: Option<PathBuf>,
     /// Trained model folder (model.safetensors + config.json; also from
@@ -152,6 +154,11 @@ pub fn run(args: PlanArgs) -> Result<()> {
     let response = predict_and_optimize(&model, &robot, request, &Default::default())?;
     if let Some((path, task)) = &plot {
         plot_plan(path, task, &robot, &response)?;
+        if response.world.is_some() {
+            let world_path = world_plot_path(path);
+            plot_world(&world_path, task, &robot, &response)?;
+            eprintln!("wrote {}", world_path.display());
+        }
     }
     crate::cli::print_json(&response)?;
     crate::cli::require_optimal(args.require_optimal, response.result.status)
@@ -356,4 +363,41 @@ fn plot_plan(path: &Path, task: &Task, robot: &Robot, response: &PlanResponse) -
         &response.result,
         robot,
     )
+}
+
+/// `--plot`'s sibling for the world picture: `traj.png` → `traj.world.png`.
+fn world_plot_path(path: &Path) -> PathBuf {
+    let mut name = path.file_stem().unwrap_or_default().to_os_string();
+    name.push(".world.");
+    name.push(path.extension().unwrap_or_default());
+    path.with_file_name(name)
+}
+
+/// `--plot` with `world: depth`: the posted obstacles, the sensed cloud the
+/// plan kept clear of, the planned TCP path (forward kinematics of the
+/// answer's trajectory) and the target, in a top and a side view.
+fn plot_world(path: &Path, task: &Task, robot: &Robot, response: &PlanResponse) -> Result<()> {
+    let tcp_path: Vec<[f64; 3]> = response
+        .result
+        .trajectory
+        .points
+        .iter()
+        .filter(|p| p.positions.len() == robot.dof())
+        .map(|p| robot.tcp_pose(&p.positions).translation.vector.into())
+        .collect();
+    let cloud = response.sensed_cloud.as_deref().unwrap_or_default();
+    let picture = ScenePicture {
+        title: format!(
+            "dPMP plan ({}): posted obstacles, sensed depth cloud and TCP path, status {}",
+            response.model,
+            response.result.status.as_str()
+        ),
+        scene_label: "posted obstacles".to_string(),
+        obstacles: &task.obstacles,
+        intruder: &[],
+        cloud,
+        tcp_path: Some(tcp_path.as_slice()),
+        target: response.target.as_ref().map(|t| t.position),
+    };
+    scene_picture(path, &picture)
 }

@@ -5,6 +5,8 @@
 //!   obstacles (one serde type each, one wire format) and their maths;
 //! - [`quaternion`]: the project's `[x, y, z, w]` quaternion convention and
 //!   its conversions to and from nalgebra;
+//! - [`slabs`]: the k-DOP around a point set, a cheap lower bound on the
+//!   distance to its convex hull;
 //! - [`segment`]: closest points and distances between segments and points
 //!   (the kernel of capsule, hull and broad-phase distances);
 //! - [`random_unit`]: uniformly random directions.
@@ -12,9 +14,11 @@
 pub mod primitive;
 pub mod quaternion;
 pub mod segment;
+pub mod slabs;
 
 pub use primitive::{midpoint, Capsule, OrientedBox, Primitive, Sphere};
 pub use segment::{closest_segments, point_segment_distance, segment_distance};
+pub use slabs::Slabs;
 
 use nalgebra::Vector3;
 use rand::Rng;

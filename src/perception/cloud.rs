@@ -10,7 +10,7 @@
 
 use super::camera::Camera;
 use super::depth::DepthImage;
-use nalgebra::{Point3, Vector3};
+use nalgebra::Vector3;
 
 /// Default voxel edge of the downsampled cloud (m).
 pub const DEFAULT_VOXEL_M: f64 = 0.005;
@@ -71,45 +71,87 @@ const KEY_OFFSET: i64 = 1 << (KEY_BITS - 1);
 
 /// The cloud of `depth` seen by `camera` (the pose it was taken from).
 ///
-/// Each kept return is keyed by its voxel; the keys are sorted and each
-/// run of equal keys becomes one point (the mean of its returns), so the
-/// cost is one back-projection per pixel and one sort of the returns.
+/// Each kept return is keyed by its voxel; neighbouring pixels of a row
+/// that fall in the same voxel are summed as they are read (at 5 mm voxels
+/// and half a metre a voxel spans several pixels), the sums are sorted by
+/// key and each run of equal keys becomes one point (the mean of its
+/// returns). The cost is one back-projection per pixel and one sort of the
+/// row runs; the order of the sums is fixed by the pixel order, so the
+/// cloud is the same bit for bit for the same input.
 pub fn depth_cloud(
     depth: &DepthImage,
     camera: &Camera,
     settings: &CloudSettings,
     keep_out: Option<&KeepOut>,
 ) -> SensedCloud {
-    let mut keyed: Vec<(u64, Vector3<f64>)> = Vec::new();
+    let k = &camera.intrinsics;
+    let width = depth.width() as usize;
+    let columns: Vec<f64> = (0..depth.width())
+        .map(|x| (f64::from(x) + 0.5 - k.cx) / k.fx)
+        .collect();
+    let rotation = camera.pose.rotation.to_rotation_matrix().into_inner();
+    let origin = camera.pose.translation.vector;
+    let mut sums: Vec<VoxelSum> = Vec::new();
     let (mut returns, mut out_of_range, mut removed_as_target) = (0, 0, 0);
     let mut max_depth_m: f64 = 0.0;
-    for y in 0..depth.height() {
-        for x in 0..depth.width() {
-            let Some(z) = depth.metres(x, y) else {
+    for (y, row) in depth.units().chunks_exact(width.max(1)).enumerate() {
+        let v = y as f64 + 0.5;
+        let row_ray = (v - k.cy) / k.fy;
+        for (x, &units) in row.iter().enumerate() {
+            if units == 0 {
                 continue;
-            };
+            }
             returns += 1;
+            let z = f64::from(units) * depth.scale_m();
             if z > settings.max_range_m {
                 out_of_range += 1;
                 continue;
             }
-            let (u, v) = (f64::from(x) + 0.5, f64::from(y) + 0.5);
-            let p = camera.back_project(u, v, z);
-            if keep_out.is_some_and(|k| k.holds(u, v, &p)) {
+            let p = rotation * Vector3::new(columns[x] * z, row_ray * z, z) + origin;
+            if keep_out.is_some_and(|k| k.holds(x as f64 + 0.5, v, &p)) {
                 removed_as_target += 1;
                 continue;
             }
             max_depth_m = max_depth_m.max(z);
-            keyed.push((voxel_key(&p.coords, settings.voxel_m), p.coords));
+            let key = voxel_key(&p, settings.voxel_m);
+            match sums.last_mut() {
+                Some(last) if last.key == key => last.add(&p, 1),
+                _ => sums.push(VoxelSum::new(key, p)),
+            }
         }
     }
-    keyed.sort_unstable_by_key(|(key, _)| *key);
+    // Stable: equal keys keep their pixel order, so the sums below are
+    // added in the same order every time.
+    sums.sort_by_key(|s| s.key);
     SensedCloud {
-        points: voxel_means(&keyed),
+        points: voxel_means(&sums),
         returns,
         out_of_range,
         removed_as_target,
         max_depth_m,
+    }
+}
+
+/// The returns of one voxel read so far: their sum and count.
+#[derive(Clone, Copy, Debug)]
+struct VoxelSum {
+    key: u64,
+    sum: Vector3<f64>,
+    count: u32,
+}
+
+impl VoxelSum {
+    fn new(key: u64, p: Vector3<f64>) -> VoxelSum {
+        VoxelSum {
+            key,
+            sum: p,
+            count: 1,
+        }
+    }
+
+    fn add(&mut self, sum: &Vector3<f64>, count: u32) {
+        self.sum += sum;
+        self.count += count;
     }
 }
 
@@ -123,22 +165,25 @@ fn voxel_key(p: &Vector3<f64>, voxel_m: f64) -> u64 {
 }
 
 /// The mean point of each run of equal keys in `sorted`.
-fn voxel_means(sorted: &[(u64, Vector3<f64>)]) -> Vec<[f64; 3]> {
+fn voxel_means(sorted: &[VoxelSum]) -> Vec<[f64; 3]> {
     sorted
-        .chunk_by(|a, b| a.0 == b.0)
+        .chunk_by(|a, b| a.key == b.key)
         .map(|run| {
-            let sum: Vector3<f64> = run.iter().map(|(_, p)| p).sum();
-            (sum / run.len() as f64).into()
+            let mut total = run[0];
+            for s in &run[1..] {
+                total.add(&s.sum, s.count);
+            }
+            (total.sum / f64::from(total.count)).into()
         })
         .collect()
 }
 
 impl KeepOut {
     /// Whether the return at pixel `(u, v)`, point `p`, belongs to the target.
-    fn holds(&self, u: f64, v: f64, p: &Point3<f64>) -> bool {
+    fn holds(&self, u: f64, v: f64, p: &Vector3<f64>) -> bool {
         let b = &self.target_box;
         let in_box = u >= b[0] && u <= b[2] && v >= b[1] && v <= b[3];
-        in_box || (p.coords - Vector3::from(self.center)).norm() <= self.radius_m
+        in_box || (p - Vector3::from(self.center)).norm() <= self.radius_m
     }
 }
 
@@ -146,6 +191,7 @@ impl KeepOut {
 mod tests {
     use super::*;
     use crate::perception::CameraModel;
+    use nalgebra::Point3;
 
     /// A camera at the reference home pose and a depth image of a wall
     /// `z` m along its axis (every pixel), `far` beyond it in the right half.

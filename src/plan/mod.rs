@@ -46,6 +46,7 @@ use crate::optim::{optimize_prior, OptimizeResponse, SolveControl};
 use crate::promp::distribution::matrix_rows;
 use crate::promp::{Basis, WeightDistribution};
 use crate::robot::Robot;
+use crate::scene::ObstacleShape;
 use crate::{Error, Result};
 use goal::{goal_from_target, locate};
 use serde::Serialize;
@@ -77,6 +78,12 @@ pub struct PlanResponse {
     /// The world sensed from depth, with `world: "depth"`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub world: Option<WorldReport>,
+    /// With `world: "depth"`, the points of the sensed cloud the plan kept
+    /// clear of (m, base frame; empty when the camera saw nothing): the
+    /// [`world::SENSED_OBSTACLE_ID`] obstacle's. Not part of the JSON
+    /// answer; for pictures (`dpmp plan --plot`).
+    #[serde(skip)]
+    pub sensed_cloud: Option<Vec<[f64; 3]>>,
 }
 
 /// Network prior, goal from the target (if any), then the optimiser.
@@ -154,12 +161,25 @@ pub fn predict_and_optimize(
         Error::Invalid { ref field, .. } if field.starts_with("prior") => model_fault(model, &e),
         other => other,
     })?;
+    // The task is spent: the sensed cloud moves out of it, uncopied.
+    let sensed_cloud = world.as_ref().map(|_| {
+        std::mem::take(&mut task.obstacles)
+            .into_iter()
+            .rev()
+            .find(|o| o.id == world::SENSED_OBSTACLE_ID)
+            .and_then(|o| match o.shape {
+                ObstacleShape::Points { points, .. } => Some(points),
+                _ => None,
+            })
+            .unwrap_or_default()
+    });
     Ok(PlanResponse {
         result,
         prior,
         model: model.name().to_string(),
         target,
         world,
+        sensed_cloud,
     })
 }
 

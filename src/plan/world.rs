@@ -1,7 +1,9 @@
 //! The world a plan is made against, besides the posted obstacles: with
 //! `world: "depth"` the aligned depth image becomes a `points` obstacle
 //! ([`sensed_world`]) and the answer reports what went into it
-//! ([`WorldReport`]).
+//! ([`WorldReport`]). [`sensed_cloud`] is that cloud on its own, for a
+//! target located with [`TargetKeepOut::locate`] (the pictures of
+//! `dpmp data preview` use it).
 //!
 //! **From depth to obstacle.** The depth image is back-projected through
 //! the camera that took it (posed at the robot's home configuration), cut
@@ -22,7 +24,7 @@
 //! ([`UNSEEN_NOTE`]).
 
 use crate::perception::cloud::{depth_cloud, CloudSettings, KeepOut, SensedCloud, DEFAULT_VOXEL_M};
-use crate::perception::{Camera, DepthImage};
+use crate::perception::{locate_target, Camera, DepthImage};
 use crate::scene::obstacle::MAX_CLOUD_POINTS;
 use crate::scene::{Obstacle, ObstacleShape};
 use crate::{Error, Result};
@@ -99,13 +101,55 @@ pub struct WorldReport {
 }
 
 /// The located target the cloud keeps out.
-pub(super) struct TargetKeepOut {
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TargetKeepOut {
     /// The target box (px).
     pub target_box: [f64; 4],
     /// The berry centre (m, base frame).
     pub center: [f64; 3],
     /// Its depth along the optical axis (m).
     pub depth_m: f64,
+}
+
+impl TargetKeepOut {
+    /// The berry behind `target_box` of `depth`, located the way a plan
+    /// with a depth image locates it ([`locate_target`] through `camera`,
+    /// posed where the image was taken: [`Camera::at_home`]); errors name
+    /// `field` (the depth input).
+    pub fn locate(
+        depth: &DepthImage,
+        target_box: [f64; 4],
+        camera: &Camera,
+        field: &str,
+    ) -> Result<TargetKeepOut> {
+        let t = locate_target(depth, &target_box, camera, field)?;
+        Ok(TargetKeepOut {
+            target_box,
+            center: t.position,
+            depth_m: t.depth_m,
+        })
+    }
+
+    /// What the cloud leaves out for this target seen by `camera`: the
+    /// pixels of its box and the ball of the berry's radius (from the box
+    /// at its depth) plus [`TARGET_KEEP_OUT_MARGIN_M`] around its centre.
+    pub fn keep_out(&self, camera: &Camera) -> KeepOut {
+        KeepOut {
+            target_box: self.target_box,
+            center: self.center,
+            radius_m: target_radius_m(camera, self) + TARGET_KEEP_OUT_MARGIN_M,
+        }
+    }
+}
+
+/// The cloud `world: "depth"` senses, before it becomes the
+/// [`SENSED_OBSTACLE_ID`] obstacle: `depth` seen by `camera` (posed where
+/// it was taken, [`Camera::at_home`]) at the default [`CloudSettings`],
+/// with `keep`'s target left out ([`TargetKeepOut::keep_out`]). No size
+/// cap is applied (a plan refuses a cloud above [`MAX_CLOUD_POINTS`]).
+pub fn sensed_cloud(depth: &DepthImage, camera: &Camera, keep: &TargetKeepOut) -> SensedCloud {
+    let keep_out = keep.keep_out(camera);
+    depth_cloud(depth, camera, &CloudSettings::default(), Some(&keep_out))
 }
 
 /// The sensed obstacle (none when nothing was seen) and its report, from
@@ -117,12 +161,8 @@ pub(super) fn sensed_world(
     field: &str,
 ) -> Result<(Option<Obstacle>, WorldReport)> {
     let settings = CloudSettings::default();
-    let keep_out = KeepOut {
-        target_box: keep.target_box,
-        center: keep.center,
-        radius_m: target_radius_m(camera, keep) + TARGET_KEEP_OUT_MARGIN_M,
-    };
-    let cloud = depth_cloud(depth, camera, &settings, Some(&keep_out));
+    let keep_out = keep.keep_out(camera);
+    let cloud = sensed_cloud(depth, camera, keep);
     check_cloud_size(&cloud, depth, field)?;
     let radius_m = point_radius_m(&settings, cloud.max_depth_m);
     let report = WorldReport {

@@ -1,6 +1,8 @@
 //! Shared plotting helpers (plotters): per-joint trajectory panels with
 //! uncertainty bands (the paper's figures), used by `dpmp prior plot`,
-//! `dpmp optimize --plot`, `dpmp plan --plot` and the reports.
+//! `dpmp optimize --plot`, `dpmp plan --plot` and the reports; and
+//! [`scene`], the sensed depth cloud over the scene's obstacles in a top and
+//! a side view (`dpmp data preview`, `dpmp plan --world depth --plot`).
 //!
 //! Text is drawn with an embedded DejaVu Sans (see `DejaVuSans.LICENSE`), so
 //! plots need no system fonts. Output format follows the file extension
@@ -8,9 +10,11 @@
 
 pub mod answer;
 mod joints;
+pub mod scene;
 
 pub use answer::{prior_and_answer, PriorBand};
 pub use joints::{joint_panels, JointSeries};
+pub use scene::{scene_picture, ScenePicture};
 
 use crate::{Error, Result};
 use std::path::{Path, PathBuf};

@@ -21,7 +21,8 @@
 
 use super::hull_topology::HullTopology;
 use super::mesh::TriangleMesh;
-use crate::geometry::point_segment_distance;
+use crate::geometry::slabs::cube_directions;
+use crate::geometry::{point_segment_distance, Slabs};
 use nalgebra::{Point3, Vector3};
 use parry3d::shape::ConvexPolyhedron;
 use std::sync::Arc;
@@ -55,6 +56,8 @@ struct HullData {
     face_balls: Vec<(Vector3<f64>, f64)>,
     /// Face adjacency for the local query (shared by moved copies).
     topology: Arc<HullTopology>,
+    /// The k-DOP around the vertices: a cheap lower bound on distances.
+    slabs: Slabs,
 }
 
 impl PartialEq for ConvexHull {
@@ -129,7 +132,10 @@ impl ConvexHull {
             .map_err(|e| format!("parry3d rejected the hull's triangles ({e:?})"))?;
         let shape = ConvexPolyhedron::from_convex_mesh(hull_points, &faces)
             .ok_or("parry3d rejected the convex hull of the mesh")?;
+        let planes = face_planes(&vertices, &faces);
+        let slabs = hull_slabs(&vertices, &planes).ok_or("the hull's vertices are not finite")?;
         let mut hull = HullData {
+            slabs,
             bound: bounding_capsule(&vertices),
             vertices,
             faces,
@@ -138,11 +144,10 @@ impl ConvexHull {
             surface: Arc::new(surface),
             allowance: ROUNDING_ALLOWANCE_M,
             source: None,
-            planes: Vec::new(),
+            planes,
             face_balls: Vec::new(),
             topology: Arc::default(),
         };
-        hull.planes = face_planes(&hull.vertices, &hull.faces);
         hull.face_balls = face_balls(&hull.vertices, &hull.faces);
         let normals: Vec<Vector3<f64>> = hull.planes.iter().map(|(n, _)| *n).collect();
         hull.topology = Arc::new(HullTopology::new(
@@ -243,7 +248,14 @@ impl ConvexHull {
                 .map(|(c, r)| ((pose * Point3::from(*c)).coords, *r))
                 .collect(),
             topology: self.0.topology.clone(),
+            slabs: self.0.slabs.placed(pose),
         }))
+    }
+
+    /// The k-DOP around the hull (link frame): its gaps are lower bounds on
+    /// the distance to the hull (before the allowance).
+    pub fn slabs(&self) -> &Slabs {
+        &self.0.slabs
     }
 
     /// Which faces touch which (for the local query).
@@ -294,6 +306,22 @@ impl ConvexHull {
                 .collect(),
         }
     }
+}
+
+/// Face normals of the largest faces (faces are sorted by area) that
+/// join the cube's directions in a hull's k-DOP: the bound is exact for a
+/// point facing one of them. 40 of them take the median gap of a point
+/// within 5 cm of a Panda hull from 4.6 mm short (the cube's 26 alone) to
+/// 0.1 mm, the 90th percentile from 16 to 3.6 mm.
+const SLAB_FACES: usize = 40;
+
+/// The k-DOP of a hull: its [`SLAB_FACES`] largest faces' normals and the
+/// cube's directions.
+fn hull_slabs(vertices: &[[f64; 3]], planes: &[(Vector3<f64>, f64)]) -> Option<Slabs> {
+    let mut directions: Vec<Vector3<f64>> =
+        planes.iter().take(SLAB_FACES).map(|(n, _)| *n).collect();
+    directions.extend(cube_directions());
+    Slabs::around(vertices, &directions)
 }
 
 fn max_plane_distance(planes: &[(Vector3<f64>, f64)], p: &[f64; 3]) -> f64 {

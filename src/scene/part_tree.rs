@@ -88,26 +88,33 @@ impl PartTree {
     }
 
     /// Visit, in the tree's fixed order, every part whose box is closer to
-    /// `query` than the current limit (starting at `limit`; boxes that
-    /// overlap are always visited). `visit` gets the part index and
-    /// returns the limit for the rest (a branch-and-bound search lowers it
-    /// as it finds closer parts).
-    pub fn visit(&self, query: &Bounds, mut limit: f64, mut visit: impl FnMut(usize) -> f64) {
-        let mut stack = vec![0usize];
-        while let Some(n) = stack.pop() {
-            let node = &self.nodes[n];
-            let gap = node.bounds.gap(query);
-            if gap >= limit && gap > 0.0 {
+    /// the query than the current limit (starting at `limit`; boxes the
+    /// query overlaps are always visited). `gap` is a lower bound on the
+    /// distance from the query to anything in a box (for a query box,
+    /// [`Bounds::gap`]); `visit` gets the part index and returns the limit
+    /// for the rest (a branch-and-bound search lowers it as it finds closer
+    /// parts).
+    pub fn visit(
+        &self,
+        gap: impl Fn(&Bounds) -> f64,
+        mut limit: f64,
+        mut visit: impl FnMut(usize) -> f64,
+    ) {
+        let mut stack = vec![(0usize, gap(&self.nodes[0].bounds))];
+        while let Some((n, node_gap)) = stack.pop() {
+            if node_gap >= limit && node_gap > 0.0 {
                 continue;
             }
+            let node = &self.nodes[n];
             match node.children {
                 Some((left, right)) => {
                     // The nearer child first, so the limit falls sooner.
-                    let (l, r) = (&self.nodes[left].bounds, &self.nodes[right].bounds);
-                    if l.gap(query) <= r.gap(query) {
-                        stack.extend([right, left]);
+                    let l = (left, gap(&self.nodes[left].bounds));
+                    let r = (right, gap(&self.nodes[right].bounds));
+                    if l.1 <= r.1 {
+                        stack.extend([r, l]);
                     } else {
-                        stack.extend([left, right]);
+                        stack.extend([l, r]);
                     }
                 }
                 None => {
@@ -162,10 +169,14 @@ mod tests {
                 let query = Bounds::ball(&c, rng.gen_range(0.0..0.2));
                 let limit = rng.gen_range(0.0..0.1);
                 let mut visited = Vec::new();
-                tree.visit(&query, limit, |i| {
-                    visited.push(i);
-                    limit
-                });
+                tree.visit(
+                    |b| b.gap(&query),
+                    limit,
+                    |i| {
+                        visited.push(i);
+                        limit
+                    },
+                );
                 visited.sort_unstable();
                 let expected: Vec<usize> = (0..parts.len())
                     .filter(|&i| {
@@ -192,14 +203,18 @@ mod tests {
         let query = Bounds::ball(&Vector3::new(0.5, 0.5, 0.5), 0.01);
         let mut best = (f64::INFINITY, usize::MAX);
         let mut visits = 0;
-        tree.visit(&query, f64::INFINITY, |i| {
-            visits += 1;
-            let gap = parts[i].gap(&query);
-            if gap < best.0 {
-                best = (gap, i);
-            }
-            best.0
-        });
+        tree.visit(
+            |b| b.gap(&query),
+            f64::INFINITY,
+            |i| {
+                visits += 1;
+                let gap = parts[i].gap(&query);
+                if gap < best.0 {
+                    best = (gap, i);
+                }
+                best.0
+            },
+        );
         let scan = (0..parts.len())
             .map(|i| parts[i].gap(&query))
             .fold(f64::INFINITY, f64::min);
