@@ -11,6 +11,7 @@
 use super::camera::Camera;
 use super::depth::DepthImage;
 use nalgebra::Vector3;
+use rayon::prelude::*;
 
 /// Default voxel edge of the downsampled cloud (m).
 pub const DEFAULT_VOXEL_M: f64 = 0.005;
@@ -69,64 +70,148 @@ pub struct SensedCloud {
 const KEY_BITS: u32 = 21;
 const KEY_OFFSET: i64 = 1 << (KEY_BITS - 1);
 
+/// Rows per band: bands are read in parallel, each into its own sums, and
+/// joined in band order, so the cloud does not depend on the thread count.
+const BAND_ROWS: usize = 40;
+
 /// The cloud of `depth` seen by `camera` (the pose it was taken from).
 ///
-/// Each kept return is keyed by its voxel; neighbouring pixels of a row
-/// that fall in the same voxel are summed as they are read (at 5 mm voxels
-/// and half a metre a voxel spans several pixels), the sums are sorted by
-/// key and each run of equal keys becomes one point (the mean of its
-/// returns). The cost is one back-projection per pixel and one sort of the
-/// row runs; the order of the sums is fixed by the pixel order, so the
-/// cloud is the same bit for bit for the same input.
+/// Each kept return is keyed by its voxel and added to a running sum: the
+/// sum of the pixel before it in its row or of the pixel above it when that
+/// is of the same voxel (at 5 mm voxels and half a metre a voxel spans
+/// several pixels both ways), a new sum otherwise. Bands of
+/// [`BAND_ROWS`] rows are read in parallel; their sums, joined in band
+/// order, are sorted by (key, position) and each voxel's become one point
+/// (the mean of its returns), added in pixel order, so the cloud is the
+/// same bit for bit for the same input, whatever the thread count.
 pub fn depth_cloud(
     depth: &DepthImage,
     camera: &Camera,
     settings: &CloudSettings,
     keep_out: Option<&KeepOut>,
 ) -> SensedCloud {
-    let k = &camera.intrinsics;
     let width = depth.width() as usize;
-    let columns: Vec<f64> = (0..depth.width())
-        .map(|x| (f64::from(x) + 0.5 - k.cx) / k.fx)
+    let reader = BandReader::new(depth, camera, settings, keep_out);
+    let bands: Vec<Band> = depth
+        .units()
+        .par_chunks(width.max(1) * BAND_ROWS)
+        .enumerate()
+        .map(|(b, rows)| reader.read(b * BAND_ROWS, rows))
         .collect();
-    let rotation = camera.pose.rotation.to_rotation_matrix().into_inner();
-    let origin = camera.pose.translation.vector;
-    let mut sums: Vec<VoxelSum> = Vec::new();
-    let (mut returns, mut out_of_range, mut removed_as_target) = (0, 0, 0);
-    let mut max_depth_m: f64 = 0.0;
-    // The sum each pixel of this row and of the row above went into.
-    let (mut above, mut here) = (vec![NO_SUM; width], vec![NO_SUM; width]);
-    for (y, row) in depth.units().chunks_exact(width.max(1)).enumerate() {
-        let v = y as f64 + 0.5;
-        let row_ray = (v - k.cy) / k.fy;
-        for (x, &units) in row.iter().enumerate() {
-            if units == 0 {
-                continue;
-            }
-            returns += 1;
-            let z = f64::from(units) * depth.scale_m();
-            if z > settings.max_range_m {
-                out_of_range += 1;
-                continue;
-            }
-            let p = rotation * Vector3::new(columns[x] * z, row_ray * z, z) + origin;
-            if keep_out.is_some_and(|k| k.holds(x as f64 + 0.5, v, &p)) {
-                removed_as_target += 1;
-                continue;
-            }
-            max_depth_m = max_depth_m.max(z);
-            let key = voxel_key(&p, settings.voxel_m);
-            here[x] = merge_return(&mut sums, key, p, above[x]);
-        }
-        std::mem::swap(&mut above, &mut here);
-        here.fill(NO_SUM);
+    let mut cloud = SensedCloud {
+        points: Vec::new(),
+        returns: 0,
+        out_of_range: 0,
+        removed_as_target: 0,
+        max_depth_m: 0.0,
+    };
+    let mut sums = Vec::with_capacity(bands.iter().map(|b| b.sums.len()).sum());
+    for band in bands {
+        cloud.returns += band.returns;
+        cloud.out_of_range += band.out_of_range;
+        cloud.removed_as_target += band.removed_as_target;
+        cloud.max_depth_m = cloud.max_depth_m.max(band.max_depth_m);
+        sums.extend(band.sums);
     }
-    SensedCloud {
-        points: voxel_means(&sums),
-        returns,
-        out_of_range,
-        removed_as_target,
-        max_depth_m,
+    cloud.points = voxel_means(&sums);
+    cloud
+}
+
+/// What one band of rows adds to the cloud.
+struct Band {
+    sums: Vec<VoxelSum>,
+    returns: usize,
+    out_of_range: usize,
+    removed_as_target: usize,
+    max_depth_m: f64,
+}
+
+/// Reads bands of a depth image into voxel sums.
+struct BandReader<'a> {
+    settings: &'a CloudSettings,
+    keep_out: Option<&'a KeepOut>,
+    width: usize,
+    scale_m: f64,
+    /// The base-frame ray through pixel (x, y) at unit depth is
+    /// R·((x − cx)/fx, (y − cy)/fy, 1): a column part (here) plus a row
+    /// part ([`BandReader::row_ray`]).
+    column_rays: Vec<Vector3<f64>>,
+    rotation: nalgebra::Matrix3<f64>,
+    origin: Vector3<f64>,
+    cy: f64,
+    fy: f64,
+}
+
+impl<'a> BandReader<'a> {
+    fn new(
+        depth: &DepthImage,
+        camera: &Camera,
+        settings: &'a CloudSettings,
+        keep_out: Option<&'a KeepOut>,
+    ) -> BandReader<'a> {
+        let k = &camera.intrinsics;
+        let rotation = camera.pose.rotation.to_rotation_matrix().into_inner();
+        BandReader {
+            settings,
+            keep_out,
+            width: depth.width() as usize,
+            scale_m: depth.scale_m(),
+            column_rays: (0..depth.width())
+                .map(|x| rotation.column(0) * ((f64::from(x) + 0.5 - k.cx) / k.fx))
+                .collect(),
+            rotation,
+            origin: camera.pose.translation.vector,
+            cy: k.cy,
+            fy: k.fy,
+        }
+    }
+
+    /// The row part of the rays of row `y`.
+    fn row_ray(&self, y: usize) -> Vector3<f64> {
+        self.rotation.column(1) * ((y as f64 + 0.5 - self.cy) / self.fy) + self.rotation.column(2)
+    }
+
+    /// The sums of the rows `units` (row-major), the first being row `first`.
+    fn read(&self, first: usize, units: &[u16]) -> Band {
+        let per_voxel = 1.0 / self.settings.voxel_m;
+        let mut band = Band {
+            sums: Vec::new(),
+            returns: 0,
+            out_of_range: 0,
+            removed_as_target: 0,
+            max_depth_m: 0.0,
+        };
+        // The sum each pixel of this row and of the row above went into.
+        let (mut above, mut here) = (vec![NO_SUM; self.width], vec![NO_SUM; self.width]);
+        for (r, row) in units.chunks_exact(self.width.max(1)).enumerate() {
+            let v = (first + r) as f64 + 0.5;
+            let row_ray = self.row_ray(first + r);
+            for (x, &raw) in row.iter().enumerate() {
+                if raw == 0 {
+                    continue;
+                }
+                band.returns += 1;
+                let z = f64::from(raw) * self.scale_m;
+                if z > self.settings.max_range_m {
+                    band.out_of_range += 1;
+                    continue;
+                }
+                let p = (self.column_rays[x] + row_ray) * z + self.origin;
+                if self
+                    .keep_out
+                    .is_some_and(|k| k.holds(x as f64 + 0.5, v, &p))
+                {
+                    band.removed_as_target += 1;
+                    continue;
+                }
+                band.max_depth_m = band.max_depth_m.max(z);
+                let key = voxel_key(&p, per_voxel);
+                here[x] = merge_return(&mut band.sums, key, p, above[x]);
+            }
+            std::mem::swap(&mut above, &mut here);
+            here.fill(NO_SUM);
+        }
+        band
     }
 }
 
@@ -175,26 +260,15 @@ impl VoxelSum {
     }
 }
 
-/// The packed key of the voxel holding `p`.
-fn voxel_key(p: &Vector3<f64>, voxel_m: f64) -> u64 {
-    let mask = (1u64 << KEY_BITS) - 1;
-    p.iter().fold(0u64, |key, c| {
-        let cell = (floor_to_i64(c / voxel_m) + KEY_OFFSET).clamp(0, mask as i64) as u64;
-        (key << KEY_BITS) | cell
-    })
-}
-
-/// `x.floor()` as an integer (saturating beyond `i64`), inline: `f64::floor`
-/// is a library call on the baseline x86-64 target, a third of the cost of
-/// a pixel.
+/// The packed key of the voxel holding `p` (`per_voxel`: voxels per metre).
+/// A coordinate is shifted by [`KEY_OFFSET`] voxels before truncating, so
+/// truncation is the floor (within 2^-32 of a voxel at the boundaries, the
+/// rounding of the shift), and cells beyond the key's range are clamped.
 #[inline]
-fn floor_to_i64(x: f64) -> i64 {
-    let truncated = x as i64;
-    if (truncated as f64) > x {
-        truncated - 1
-    } else {
-        truncated
-    }
+fn voxel_key(p: &Vector3<f64>, per_voxel: f64) -> u64 {
+    let mask = (1u64 << KEY_BITS) - 1;
+    let cell = |c: f64| ((c * per_voxel + KEY_OFFSET as f64) as u64).min(mask);
+    (cell(p.x) << (2 * KEY_BITS)) | (cell(p.y) << KEY_BITS) | cell(p.z)
 }
 
 /// The mean point of each voxel: the sums sorted by (key, position), so
@@ -205,7 +279,7 @@ fn voxel_means(sums: &[VoxelSum]) -> Vec<[f64; 3]> {
         .enumerate()
         .map(|(i, s)| (s.key, i as u32))
         .collect();
-    order.sort_unstable();
+    order.par_sort_unstable();
     order
         .chunk_by(|a, b| a.0 == b.0)
         .map(|run| {

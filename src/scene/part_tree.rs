@@ -3,10 +3,12 @@
 //! visits only the parts whose boxes come within the query's distance —
 //! the cost follows what is near the robot, not the size of the cloud.
 //!
-//! Built once when the scene compiles: parts are split at the median of
-//! their box centres along the longest axis of the node's box until a leaf
-//! holds at most [`LEAF_PARTS`]. The visit order is fixed by the build, so
-//! queries are deterministic.
+//! Built once when the scene compiles, in linear time after one sort: the
+//! parts are ordered along a Morton (Z-order) curve through their box
+//! centres, and each node's run of that order is split in halves until a
+//! leaf holds at most [`LEAF_PARTS`] (the curve keeps each half compact).
+//! The order is a total one (ties by part index) and the visit order is
+//! fixed by the build, so queries are deterministic.
 
 use super::broadphase::Bounds;
 
@@ -39,49 +41,48 @@ pub struct PartTree {
 impl PartTree {
     /// The tree over `bounds` (one box per part); `None` when empty.
     pub fn new(bounds: &[Bounds]) -> Option<PartTree> {
-        if bounds.is_empty() {
-            return None;
-        }
-        // The split works on a contiguous array of (box centre, part), so
-        // the median selections touch no other memory.
-        let mut items: Vec<([f64; 3], usize)> = bounds
+        let all = bounds.iter().copied().reduce(|a, b| a.merged(&b))?;
+        let extent = (all.max - all.min).map(|e| e.max(f64::MIN_POSITIVE));
+        let cells = f64::from(MORTON_CELLS - 1);
+        let mut keyed: Vec<(u64, usize)> = bounds
             .iter()
             .enumerate()
-            .map(|(i, b)| ((b.min + b.max).into(), i))
+            .map(|(i, b)| {
+                let centre = (b.min + b.max) * 0.5 - all.min;
+                let cell = |k: usize| ((centre[k] / extent[k]) * cells) as u32;
+                (morton(cell(0), cell(1), cell(2)), i)
+            })
             .collect();
+        keyed.sort_unstable();
+        let codes: Vec<u64> = keyed.iter().map(|&(c, _)| c).collect();
         let mut tree = PartTree {
             nodes: Vec::with_capacity(2 * bounds.len() / LEAF_PARTS + 1),
-            order: Vec::new(),
+            order: keyed.into_iter().map(|(_, i)| i).collect(),
         };
-        tree.build(bounds, &mut items, 0);
-        tree.order = items.iter().map(|&(_, i)| i).collect();
+        tree.build(bounds, &codes, 0, bounds.len());
         Some(tree)
     }
 
-    /// Build the node over `items` (which start at `start` in the final
-    /// order); returns its index. A node's box is its children's merged.
-    fn build(&mut self, bounds: &[Bounds], items: &mut [([f64; 3], usize)], start: usize) -> usize {
+    /// Build the node over the parts `order[start..end]` (Morton codes
+    /// `codes`, sorted); returns its index. A node's box is its children's
+    /// merged.
+    fn build(&mut self, bounds: &[Bounds], codes: &[u64], start: usize, end: usize) -> usize {
         let index = self.nodes.len();
         self.nodes.push(Node {
-            bounds: bounds[items[0].1],
+            bounds: bounds[self.order[start]],
             start,
-            end: start + items.len(),
+            end,
             children: None,
         });
-        if items.len() <= LEAF_PARTS {
-            self.nodes[index].bounds = items
-                .iter()
-                .map(|&(_, i)| bounds[i])
-                .reduce(|a, b| a.merged(&b))
-                .unwrap_or(bounds[items[0].1]);
+        if end - start <= LEAF_PARTS {
+            for &part in &self.order[start + 1..end] {
+                self.nodes[index].bounds = self.nodes[index].bounds.merged(&bounds[part]);
+            }
             return index;
         }
-        let axis = longest_axis(items);
-        let mid = items.len() / 2;
-        items.select_nth_unstable_by(mid, |a, b| a.0[axis].total_cmp(&b.0[axis]));
-        let (low, high) = items.split_at_mut(mid);
-        let left = self.build(bounds, low, start);
-        let right = self.build(bounds, high, start + mid);
+        let mid = split(codes, start, end);
+        let left = self.build(bounds, codes, start, mid);
+        let right = self.build(bounds, codes, mid, end);
         self.nodes[index].bounds = self.nodes[left].bounds.merged(&self.nodes[right].bounds);
         self.nodes[index].children = Some((left, right));
         index
@@ -127,18 +128,37 @@ impl PartTree {
     }
 }
 
-/// The axis along which the box centres of `items` spread most.
-fn longest_axis(items: &[([f64; 3], usize)]) -> usize {
-    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
-    for (c, _) in items {
-        for k in 0..3 {
-            lo[k] = lo[k].min(c[k]);
-            hi[k] = hi[k].max(c[k]);
-        }
+/// Where the run `codes[start..end]` (sorted, at least two) splits: at the
+/// first code with the highest bit in which the run's codes differ set —
+/// the cut of the octree cell they share, along its longest axis in the
+/// curve's order — so both halves are compact; in the middle when all the
+/// codes are equal.
+fn split(codes: &[u64], start: usize, end: usize) -> usize {
+    let differ = codes[start] ^ codes[end - 1];
+    if differ == 0 {
+        return start + (end - start) / 2;
     }
-    (0..3)
-        .max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b])))
-        .unwrap_or(0)
+    let bit = 1u64 << (63 - differ.leading_zeros());
+    start + codes[start..end].partition_point(|c| c & bit == 0)
+}
+
+/// Cells per axis of the Morton grid over the parts' box (21 bits each).
+const MORTON_CELLS: u32 = 1 << 21;
+
+/// The Morton code of a cell: the bits of `x`, `y` and `z` interleaved.
+fn morton(x: u32, y: u32, z: u32) -> u64 {
+    spread(x) | (spread(y) << 1) | (spread(z) << 2)
+}
+
+/// The low 21 bits of `v`, each moved to every third bit.
+fn spread(v: u32) -> u64 {
+    let mut x = u64::from(v) & 0x1f_ffff;
+    x = (x | (x << 32)) & 0x001f_0000_0000_ffff;
+    x = (x | (x << 16)) & 0x001f_0000_ff00_00ff;
+    x = (x | (x << 8)) & 0x100f_00f0_0f00_f00f;
+    x = (x | (x << 4)) & 0x10c3_0c30_c30c_30c3;
+    x = (x | (x << 2)) & 0x1249_2492_4924_9249;
+    x
 }
 
 #[cfg(test)]
@@ -193,6 +213,31 @@ mod tests {
                 }
                 assert!(visited.windows(2).all(|w| w[0] != w[1]), "visited twice");
             }
+        }
+    }
+
+    #[test]
+    fn morton_codes_interleave_the_cell_bits() {
+        assert_eq!(morton(1, 0, 0), 1);
+        assert_eq!(morton(0, 1, 0), 2);
+        assert_eq!(morton(0, 0, 1), 4);
+        assert_eq!(morton(3, 0, 0), 0b1001);
+        let top = MORTON_CELLS - 1;
+        assert_eq!(morton(top, top, top), (1u64 << 63) - 1);
+        // Brute force on random cells: bit k of x lands at bit 3k.
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+        for _ in 0..100 {
+            let (x, y, z) = (
+                rng.gen_range(0..MORTON_CELLS),
+                rng.gen_range(0..MORTON_CELLS),
+                rng.gen_range(0..MORTON_CELLS),
+            );
+            let expected = (0..21).fold(0u64, |code, k| {
+                code | (u64::from(x >> k & 1) << (3 * k))
+                    | (u64::from(y >> k & 1) << (3 * k + 1))
+                    | (u64::from(z >> k & 1) << (3 * k + 2))
+            });
+            assert_eq!(morton(x, y, z), expected);
         }
     }
 

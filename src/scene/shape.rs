@@ -81,12 +81,25 @@ pub fn compile_obstacle(shape: &ObstacleShape) -> Option<CompiledObstacle> {
 }
 
 /// A point cloud: one ball of `radius` per point, with a tree over them.
+/// The balls share one parry shape; each part is only its centre.
 fn cloud_obstacle(points: &[[f64; 3]], radius: f64) -> CompiledObstacle {
-    let balls: Vec<Primitive> = points
+    let ball = SharedShape::new(Ball::new(radius as f32));
+    let parts: Vec<Part> = points
         .iter()
-        .map(|&center| Sphere { center, radius }.into())
+        .map(|&c| {
+            let centre = Vector3::from(c);
+            Part {
+                shape: ball.clone(),
+                pose: Isometry3::translation(c[0], c[1], c[2]),
+                core: Core::new(centre, centre, radius),
+                long: None,
+            }
+        })
         .collect();
-    let boxes: Vec<Bounds> = balls.iter().map(Bounds::of_primitive).collect();
+    let boxes: Vec<Bounds> = points
+        .iter()
+        .map(|c| Bounds::ball(&Vector3::from(*c), radius))
+        .collect();
     let bounds = boxes
         .iter()
         .copied()
@@ -96,7 +109,7 @@ fn cloud_obstacle(points: &[[f64; 3]], radius: f64) -> CompiledObstacle {
         .then(|| PartTree::new(&boxes))
         .flatten();
     CompiledObstacle {
-        parts: balls.iter().map(primitive_part).collect(),
+        parts,
         bounds,
         tree,
     }
