@@ -440,4 +440,23 @@ mod tests {
             );
         }
     }
+
+    /// The bands are joined in band order: one thread or two, the same
+    /// cloud bit for bit.
+    #[test]
+    fn the_cloud_does_not_depend_on_the_thread_count() {
+        let (camera, depth) = wall(0.45, 0.9);
+        let settings = CloudSettings::default();
+        let on = |threads: usize| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| depth_cloud(&depth, &camera, &settings, None))
+        };
+        let one = on(1);
+        assert!(one.points.len() > 1000);
+        assert_eq!(one, on(2));
+        assert_eq!(one, on(3));
+    }
 }
