@@ -266,8 +266,8 @@ impl VoxelSum {
 /// rounding of the shift), and cells beyond the key's range are clamped.
 #[inline]
 fn voxel_key(p: &Vector3<f64>, per_voxel: f64) -> u64 {
-    let mask = (1u64 << KEY_BITS) - 1;
-    let cell = |c: f64| ((c * per_voxel + KEY_OFFSET as f64) as u64).min(mask);
+    let mask = (1i64 << KEY_BITS) - 1;
+    let cell = |c: f64| ((c * per_voxel + KEY_OFFSET as f64) as i64).clamp(0, mask) as u64;
     (cell(p.x) << (2 * KEY_BITS)) | (cell(p.y) << KEY_BITS) | cell(p.z)
 }
 

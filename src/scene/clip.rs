@@ -36,10 +36,10 @@ pub enum Cut {
 /// The piece of `part` that can hold the closest point to a robot shape
 /// within `reach` of `centre` (see the module docs).
 pub fn near_piece(part: &Part, centre: &Vector3<f64>, reach: f64) -> Cut {
-    match part.long {
+    match part.long.as_deref() {
         None => Cut::Whole,
-        Some(LongPart::Segment { flat_ends }) => segment_piece(part, centre, reach, flat_ends),
-        Some(LongPart::Box(b)) => box_piece(part, &b, centre, reach),
+        Some(&LongPart::Segment { flat_ends }) => segment_piece(part, centre, reach, flat_ends),
+        Some(LongPart::Box(b)) => box_piece(part, b, centre, reach),
     }
 }
 

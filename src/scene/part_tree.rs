@@ -11,6 +11,7 @@
 //! fixed by the build, so queries are deterministic.
 
 use super::broadphase::Bounds;
+use rayon::prelude::*;
 
 /// Largest number of parts in a leaf.
 pub const LEAF_PARTS: usize = 8;
@@ -45,7 +46,7 @@ impl PartTree {
         let extent = (all.max - all.min).map(|e| e.max(f64::MIN_POSITIVE));
         let cells = f64::from(MORTON_CELLS - 1);
         let mut keyed: Vec<(u64, usize)> = bounds
-            .iter()
+            .par_iter()
             .enumerate()
             .map(|(i, b)| {
                 let centre = (b.min + b.max) * 0.5 - all.min;
@@ -53,7 +54,7 @@ impl PartTree {
                 (morton(cell(0), cell(1), cell(2)), i)
             })
             .collect();
-        keyed.sort_unstable();
+        keyed.par_sort_unstable();
         let codes: Vec<u64> = keyed.iter().map(|&(c, _)| c).collect();
         let mut tree = PartTree {
             nodes: Vec::with_capacity(2 * bounds.len() / LEAF_PARTS + 1),

@@ -41,8 +41,9 @@ pub struct Part {
     /// A capsule around the part (base frame), for the broad phase.
     pub core: Core,
     /// The exact shape of a long part, cut near each robot shape per query
-    /// ([`super::clip`]); `None` for short parts.
-    pub long: Option<LongPart>,
+    /// ([`super::clip`]); `None` for short parts (boxed: a cloud holds
+    /// thousands of short parts, which need only the pointer's room).
+    pub long: Option<Box<LongPart>>,
 }
 
 impl std::fmt::Debug for Part {
@@ -129,7 +130,7 @@ fn cylinder_obstacle(a: &[f64; 3], b: &[f64; 3], radius: f64) -> CompiledObstacl
     let pose = Isometry3::from_parts(Translation3::from((a + b) * 0.5), y_onto(&axis));
     let shape = SharedShape::new(Cylinder::new(0.5 * axis.norm() as f32, radius as f32));
     let core = Core::new(a, b, radius);
-    let long = (axis.norm() > LONG_PART_M).then_some(LongPart::Segment { flat_ends: true });
+    let long = (axis.norm() > LONG_PART_M).then(|| Box::new(LongPart::Segment { flat_ends: true }));
     single(
         Part {
             shape,
@@ -220,12 +221,12 @@ fn primitive_part(primitive: &Primitive) -> Part {
     let long = match primitive {
         Primitive::Sphere(_) => None,
         Primitive::Capsule(c) => ((Vector3::from(c.b) - Vector3::from(c.a)).norm() > LONG_PART_M)
-            .then_some(LongPart::Segment { flat_ends: false }),
+            .then(|| Box::new(LongPart::Segment { flat_ends: false })),
         Primitive::Box(b) => b
             .half_extents
             .iter()
             .any(|h| 2.0 * h > LONG_PART_M)
-            .then_some(LongPart::Box(*b)),
+            .then(|| Box::new(LongPart::Box(*b))),
     };
     Part {
         shape: shape.shared(),
