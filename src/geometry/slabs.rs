@@ -69,12 +69,28 @@ impl Slabs {
         Some(Slabs { normals, offsets })
     }
 
+    /// A polytope given by no half-space yet (every gap is −∞), to which
+    /// [`Slabs::add_plane`] adds them.
+    pub fn unbounded() -> Slabs {
+        Slabs {
+            normals: Vec::new(),
+            offsets: Vec::new(),
+        }
+    }
+
+    /// Add the half-space `u·x ≤ offset` (`u` unit length, from the caller):
+    /// the polytope is cut by it, so it must hold whatever the gaps bound.
+    pub fn add_plane(&mut self, u: Vector3<f64>, offset: f64) {
+        self.normals.push(u);
+        self.offsets.push(offset);
+    }
+
     /// Number of directions.
     pub fn len(&self) -> usize {
         self.normals.len()
     }
 
-    /// Whether there are no directions (never, for a built k-DOP).
+    /// Whether there are no directions (never for [`Slabs::around`]).
     pub fn is_empty(&self) -> bool {
         self.normals.is_empty()
     }
@@ -170,6 +186,12 @@ mod tests {
         assert!(Slabs::around(&cube(1.0), &[]).is_none());
         assert!(Slabs::around(&[[f64::NAN, 0.0, 0.0]], &d).is_none());
         assert!(Slabs::around(&cube(1.0), &[Vector3::zeros()]).is_none());
+        // Planes added one by one: no plane bounds nothing, one is its
+        // half-space.
+        let mut planes = Slabs::unbounded();
+        assert_eq!(planes.point_gap(&Vector3::zeros()), f64::NEG_INFINITY);
+        planes.add_plane(Vector3::z(), 0.5);
+        assert!((planes.point_gap(&Vector3::new(3.0, -2.0, 1.25)) - 0.75).abs() < 1e-15);
     }
 
     /// Random point sets moved by random poses: the gap of a point, a

@@ -16,7 +16,7 @@ use super::shape::{CompiledObstacle, RobotPart};
 use super::Scene;
 use crate::geometry::Slabs;
 use crate::robot::{Frames, Robot, ShapeGeometry};
-use nalgebra::{DVector, Point3, Vector3};
+use nalgebra::{DVector, Point3};
 use serde::Serialize;
 use std::cell::{OnceCell, RefCell};
 
@@ -211,7 +211,7 @@ fn tree_contact(
 ) -> Option<PairContact> {
     let mut best: Option<PairContact> = None;
     let mut limit = prediction;
-    let planes = RefCell::new(SupportPlanes::default());
+    let planes = RefCell::new(SupportPlanes::new());
     // The limit only falls below `prediction`, so a box the cheap bounds
     // put beyond `prediction` needs no finer one.
     let node_gap = |b: &Bounds| {
@@ -254,41 +254,36 @@ const SUPPORT_SLACK_M: f64 = 1e-7;
 /// lies behind the plane through it normal to the contact, and `u·(y − p)`
 /// (`u` from the hull towards the obstacle, `p` the reported robot witness,
 /// already moved out by the hull's allowance) is a lower bound on the
-/// reported distance of anything `y`.
-#[derive(Default)]
-struct SupportPlanes {
-    planes: Vec<(Vector3<f64>, f64)>,
-}
+/// reported distance of anything `y`: the planes make a polytope around the
+/// hull whose gaps are [`Slabs`]' gaps.
+struct SupportPlanes(Slabs);
 
 impl SupportPlanes {
     const CAPACITY: usize = 4;
 
+    fn new() -> SupportPlanes {
+        SupportPlanes(Slabs::unbounded())
+    }
+
     /// Keep the plane of `contact` when it is a separated one.
     fn add(&mut self, contact: &PairContact) {
-        if contact.distance > 0.0 && self.planes.len() < Self::CAPACITY {
+        if contact.distance > 0.0 && self.0.len() < Self::CAPACITY {
             let u = -contact.normal;
-            self.planes
-                .push((u, u.dot(&contact.point_robot) + SUPPORT_SLACK_M));
+            self.0
+                .add_plane(u, u.dot(&contact.point_robot) + SUPPORT_SLACK_M);
         }
     }
 
     /// Lower bound on the distance to a part inside `core` (−∞ with no plane).
     #[inline]
     fn core_gap(&self, core: &Core) -> f64 {
-        self.planes
-            .iter()
-            .map(|(u, o)| u.dot(&core.a).min(u.dot(&core.b)) - o - core.radius)
-            .fold(f64::NEG_INFINITY, f64::max)
+        self.0.segment_gap(&core.a, &core.b) - core.radius
     }
 
     /// Lower bound on the distance to anything in the box `b`.
     #[inline]
     fn box_gap(&self, b: &Bounds) -> f64 {
-        let (centre, half) = ((b.min + b.max) * 0.5, (b.max - b.min) * 0.5);
-        self.planes
-            .iter()
-            .map(|(u, o)| u.dot(&centre) - u.abs().dot(&half) - o)
-            .fold(f64::NEG_INFINITY, f64::max)
+        self.0.box_gap(&b.min, &b.max)
     }
 }
 
