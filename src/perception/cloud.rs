@@ -53,7 +53,8 @@ pub struct KeepOut {
 /// A sensed cloud and what went into it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SensedCloud {
-    /// One point per occupied voxel (m, base frame), in voxel order.
+    /// One point per occupied voxel (m, base frame), voxels in the order
+    /// the image first meets them (rows top to bottom).
     pub points: Vec<[f64; 3]>,
     /// Pixels with a depth return.
     pub returns: usize,
@@ -81,9 +82,9 @@ const BAND_ROWS: usize = 40;
 /// is of the same voxel (at 5 mm voxels and half a metre a voxel spans
 /// several pixels both ways), a new sum otherwise. Bands of
 /// [`BAND_ROWS`] rows are read in parallel; their sums, joined in band
-/// order, are sorted by (key, position) and each voxel's become one point
-/// (the mean of its returns), added in pixel order, so the cloud is the
-/// same bit for bit for the same input, whatever the thread count.
+/// order, are gathered by voxel and each voxel's become one point (the mean
+/// of its returns), added in pixel order, so the cloud is the same bit for
+/// bit for the same input, whatever the thread count.
 pub fn depth_cloud(
     depth: &DepthImage,
     camera: &Camera,
@@ -106,37 +107,47 @@ pub fn depth_cloud(
         max_depth_m: 0.0,
     };
     let mut sums = Vec::with_capacity(bands.iter().map(|b| b.sums.len()).sum());
+    let mut max_unit = 0;
     for band in bands {
         cloud.returns += band.returns;
         cloud.out_of_range += band.out_of_range;
         cloud.removed_as_target += band.removed_as_target;
-        cloud.max_depth_m = cloud.max_depth_m.max(band.max_depth_m);
+        max_unit = max_unit.max(band.max_unit);
         sums.extend(band.sums);
     }
-    cloud.points = voxel_means(&sums);
+    cloud.max_depth_m = f64::from(max_unit) * depth.scale_m();
+    cloud.points = voxel_means(&sums, settings.voxel_m);
     cloud
 }
 
 /// What one band of rows adds to the cloud.
 struct Band {
+    /// Sums in voxel units (`p / voxel_m`).
     sums: Vec<VoxelSum>,
     returns: usize,
     out_of_range: usize,
     removed_as_target: usize,
-    max_depth_m: f64,
+    /// The deepest raw unit kept.
+    max_unit: u16,
 }
 
-/// Reads bands of a depth image into voxel sums.
+/// Reads bands of a depth image into voxel sums. Points are computed in
+/// voxel units straight from the raw depth units (one multiply-add per
+/// axis, no metres in between), so a point's voxel is its truncation.
 struct BandReader<'a> {
-    settings: &'a CloudSettings,
     keep_out: Option<&'a KeepOut>,
     width: usize,
-    scale_m: f64,
-    /// The base-frame ray through pixel (x, y) at unit depth is
-    /// R·((x − cx)/fx, (y − cy)/fy, 1): a column part (here) plus a row
-    /// part ([`BandReader::row_ray`]).
+    voxel_m: f64,
+    /// Deepest raw unit within the range (deeper returns are dropped).
+    max_unit: u16,
+    /// The base-frame ray through pixel (x, y) per raw depth unit, in voxel
+    /// units, is R·((x − cx)/fx, (y − cy)/fy, 1)·scale/voxel: a column part
+    /// (here) plus a row part ([`BandReader::row_ray`]).
     column_rays: Vec<Vector3<f64>>,
-    rotation: nalgebra::Matrix3<f64>,
+    /// R's second and third columns, scaled as the rays are.
+    row_axis: Vector3<f64>,
+    optical_axis: Vector3<f64>,
+    /// The camera's position in voxel units.
     origin: Vector3<f64>,
     cy: f64,
     fy: f64,
@@ -146,21 +157,23 @@ impl<'a> BandReader<'a> {
     fn new(
         depth: &DepthImage,
         camera: &Camera,
-        settings: &'a CloudSettings,
+        settings: &CloudSettings,
         keep_out: Option<&'a KeepOut>,
     ) -> BandReader<'a> {
         let k = &camera.intrinsics;
         let rotation = camera.pose.rotation.to_rotation_matrix().into_inner();
+        let per_unit = depth.scale_m() / settings.voxel_m;
         BandReader {
-            settings,
             keep_out,
             width: depth.width() as usize,
-            scale_m: depth.scale_m(),
+            voxel_m: settings.voxel_m,
+            max_unit: deepest_unit_within(depth.scale_m(), settings.max_range_m),
             column_rays: (0..depth.width())
-                .map(|x| rotation.column(0) * ((f64::from(x) + 0.5 - k.cx) / k.fx))
+                .map(|x| rotation.column(0) * ((f64::from(x) + 0.5 - k.cx) / k.fx * per_unit))
                 .collect(),
-            rotation,
-            origin: camera.pose.translation.vector,
+            row_axis: rotation.column(1) * per_unit,
+            optical_axis: rotation.column(2) * per_unit,
+            origin: camera.pose.translation.vector / settings.voxel_m,
             cy: k.cy,
             fy: k.fy,
         }
@@ -168,18 +181,17 @@ impl<'a> BandReader<'a> {
 
     /// The row part of the rays of row `y`.
     fn row_ray(&self, y: usize) -> Vector3<f64> {
-        self.rotation.column(1) * ((y as f64 + 0.5 - self.cy) / self.fy) + self.rotation.column(2)
+        self.row_axis * ((y as f64 + 0.5 - self.cy) / self.fy) + self.optical_axis
     }
 
     /// The sums of the rows `units` (row-major), the first being row `first`.
     fn read(&self, first: usize, units: &[u16]) -> Band {
-        let per_voxel = 1.0 / self.settings.voxel_m;
         let mut band = Band {
             sums: Vec::new(),
             returns: 0,
             out_of_range: 0,
             removed_as_target: 0,
-            max_depth_m: 0.0,
+            max_unit: 0,
         };
         // The sum each pixel of this row and of the row above went into.
         let (mut above, mut here) = (vec![NO_SUM; self.width], vec![NO_SUM; self.width]);
@@ -191,28 +203,41 @@ impl<'a> BandReader<'a> {
                     continue;
                 }
                 band.returns += 1;
-                let z = f64::from(raw) * self.scale_m;
-                if z > self.settings.max_range_m {
+                if raw > self.max_unit {
                     band.out_of_range += 1;
                     continue;
                 }
-                let p = (self.column_rays[x] + row_ray) * z + self.origin;
+                let p = (self.column_rays[x] + row_ray) * f64::from(raw) + self.origin;
                 if self
                     .keep_out
-                    .is_some_and(|k| k.holds(x as f64 + 0.5, v, &p))
+                    .is_some_and(|k| k.holds(x as f64 + 0.5, v, &(p * self.voxel_m)))
                 {
                     band.removed_as_target += 1;
                     continue;
                 }
-                band.max_depth_m = band.max_depth_m.max(z);
-                let key = voxel_key(&p, per_voxel);
-                here[x] = merge_return(&mut band.sums, key, p, above[x]);
+                band.max_unit = band.max_unit.max(raw);
+                here[x] = merge_return(&mut band.sums, voxel_key(&p), p, above[x]);
             }
             std::mem::swap(&mut above, &mut here);
             here.fill(NO_SUM);
         }
         band
     }
+}
+
+/// The deepest raw unit whose depth (`unit × scale_m`) is within
+/// `max_range_m` (0: none is).
+fn deepest_unit_within(scale_m: f64, max_range_m: f64) -> u16 {
+    let within = |u: u32| f64::from(u) * scale_m <= max_range_m;
+    let top = u32::from(u16::MAX);
+    let mut unit = (max_range_m / scale_m).clamp(0.0, f64::from(top)) as u32;
+    while unit < top && within(unit + 1) {
+        unit += 1;
+    }
+    while unit > 0 && !within(unit) {
+        unit -= 1;
+    }
+    unit as u16
 }
 
 /// No sum (a pixel without a kept return).
@@ -260,37 +285,59 @@ impl VoxelSum {
     }
 }
 
-/// The packed key of the voxel holding `p` (`per_voxel`: voxels per metre).
-/// A coordinate is shifted by [`KEY_OFFSET`] voxels before truncating, so
-/// truncation is the floor (within 2^-32 of a voxel at the boundaries, the
-/// rounding of the shift), and cells beyond the key's range are clamped.
+/// The packed key of the voxel holding `p` (in voxel units). A coordinate
+/// is shifted by [`KEY_OFFSET`] voxels before truncating, so truncation is
+/// the floor (within 2^-32 of a voxel at the boundaries, the rounding of the
+/// shift), and cells beyond the key's range are clamped.
 #[inline]
-fn voxel_key(p: &Vector3<f64>, per_voxel: f64) -> u64 {
-    let mask = (1i64 << KEY_BITS) - 1;
-    let cell = |c: f64| ((c * per_voxel + KEY_OFFSET as f64) as i64).clamp(0, mask) as u64;
+fn voxel_key(p: &Vector3<f64>) -> u64 {
+    // Clamped as a float, so the cast needs no saturation of its own.
+    let top = ((1u64 << KEY_BITS) - 1) as f64;
+    let cell = |c: f64| (c + KEY_OFFSET as f64).clamp(0.0, top) as i64 as u64;
     (cell(p.x) << (2 * KEY_BITS)) | (cell(p.y) << KEY_BITS) | cell(p.z)
 }
 
-/// The mean point of each voxel: the sums sorted by (key, position), so
-/// the sums of one voxel are added in pixel order, the same every time.
-fn voxel_means(sums: &[VoxelSum]) -> Vec<[f64; 3]> {
-    let mut order: Vec<(u64, u32)> = sums
-        .iter()
-        .enumerate()
-        .map(|(i, s)| (s.key, i as u32))
-        .collect();
-    order.par_sort_unstable();
-    order
-        .chunk_by(|a, b| a.0 == b.0)
-        .map(|run| {
-            let mut total = sums[run[0].1 as usize];
-            for &(_, i) in &run[1..] {
-                let s = &sums[i as usize];
-                total.add(&s.sum, s.count);
+/// The mean point of each voxel, voxels in the order they are first met
+/// (bands top to bottom, pixels in row order): the sums are gathered by key
+/// in an open-addressing table and each voxel's are added in pixel order,
+/// so the cloud is the same bit for bit every time. The sums are in voxel
+/// units; the means are in metres.
+fn voxel_means(sums: &[VoxelSum], voxel_m: f64) -> Vec<[f64; 3]> {
+    let slots_bits = (2 * sums.len())
+        .max(16)
+        .next_power_of_two()
+        .trailing_zeros();
+    let mask = (1usize << slots_bits) - 1;
+    let mut slots = vec![NO_SUM; mask + 1];
+    let mut voxels: Vec<VoxelSum> = Vec::with_capacity(sums.len());
+    for s in sums {
+        let mut slot = key_slot(s.key, slots_bits);
+        loop {
+            match slots[slot] {
+                NO_SUM => {
+                    slots[slot] = voxels.len() as u32;
+                    voxels.push(*s);
+                    break;
+                }
+                v if voxels[v as usize].key == s.key => {
+                    voxels[v as usize].add(&s.sum, s.count);
+                    break;
+                }
+                _ => slot = (slot + 1) & mask,
             }
-            (total.sum / f64::from(total.count)).into()
-        })
+        }
+    }
+    voxels
+        .iter()
+        .map(|v| (v.sum * (voxel_m / f64::from(v.count))).into())
         .collect()
+}
+
+/// The table slot a voxel key hashes to (Fibonacci hashing: the top `bits`
+/// bits of the key times 2^64 / φ).
+#[inline]
+fn key_slot(key: u64, bits: u32) -> usize {
+    (key.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> (64 - bits)) as usize
 }
 
 impl KeepOut {
@@ -431,12 +478,38 @@ mod tests {
             }
         }
         assert_eq!(cloud.points.len(), voxels.len());
-        // Both are in voxel order (x, then y, then z).
-        for (p, (sum, n)) in cloud.points.iter().zip(voxels.values()) {
-            let mean = sum / *n;
+        // Each point is its voxel's mean (a mean lies in its voxel).
+        let mut seen = std::collections::BTreeSet::new();
+        for p in &cloud.points {
+            let key = p.map(|c| (c / settings.voxel_m).floor() as i64);
+            let (sum, n) = voxels[&key];
+            let mean = sum / n;
             assert!(
                 (Vector3::from(*p) - mean).norm() < 1e-12,
                 "{p:?} vs {mean:?}"
+            );
+            assert!(seen.insert(key), "voxel {key:?} twice");
+        }
+    }
+
+    /// The range cut on raw units keeps exactly the returns whose depth in
+    /// metres is within the range.
+    #[test]
+    fn the_deepest_unit_kept_is_the_last_within_the_range() {
+        for (scale, range) in [
+            (0.001, 1.2),
+            (0.0005, 1.2),
+            (0.0001, 0.3),
+            (1e-4, 0.7),
+            (0.00025, 100.0),
+            (0.001, 0.0005),
+        ] {
+            let unit = deepest_unit_within(scale, range);
+            let within = |u: u16| f64::from(u) * scale <= range;
+            assert!(unit == 0 || within(unit), "{scale} {range}: {unit}");
+            assert!(
+                unit == u16::MAX || !within(unit + 1),
+                "{scale} {range}: {unit}"
             );
         }
     }

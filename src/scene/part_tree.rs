@@ -5,8 +5,9 @@
 //!
 //! Built once when the scene compiles, in linear time after one sort: the
 //! parts are ordered along a Morton (Z-order) curve through their box
-//! centres, and each node's run of that order is split in halves until a
-//! leaf holds at most [`LEAF_PARTS`] (the curve keeps each half compact).
+//! centres, and each node's run of that order is split at the highest bit
+//! in which its codes differ until a leaf holds at most [`LEAF_PARTS`] (the
+//! curve keeps each half compact).
 //! The order is a total one (ties by part index) and the visit order is
 //! fixed by the build, so queries are deterministic.
 
@@ -44,27 +45,31 @@ impl PartTree {
     pub fn new(bounds: &[Bounds]) -> Option<PartTree> {
         let all = bounds.iter().copied().reduce(|a, b| a.merged(&b))?;
         let extent = (all.max - all.min).map(|e| e.max(f64::MIN_POSITIVE));
-        let cells = f64::from(MORTON_CELLS - 1);
-        let mut keyed: Vec<(u64, usize)> = bounds
+        // One u64 per part: its Morton code above its index, so a plain
+        // sort orders the parts along the curve, ties by index.
+        let index_bits = usize::BITS - bounds.len().leading_zeros();
+        let axis_bits = ((u64::BITS - index_bits) / 3).min(MORTON_AXIS_BITS);
+        let cells = f64::from((1u32 << axis_bits) - 1);
+        let mut keys: Vec<u64> = bounds
             .par_iter()
             .enumerate()
             .map(|(i, b)| {
                 let centre = (b.min + b.max) * 0.5 - all.min;
                 let cell = |k: usize| ((centre[k] / extent[k]) * cells) as u32;
-                (morton(cell(0), cell(1), cell(2)), i)
+                (morton(cell(0), cell(1), cell(2)) << index_bits) | i as u64
             })
             .collect();
-        keyed.par_sort_unstable();
-        let codes: Vec<u64> = keyed.iter().map(|&(c, _)| c).collect();
+        radix_sort(&mut keys, index_bits);
+        let index_mask = (1u64 << index_bits) - 1;
         let mut tree = PartTree {
             nodes: Vec::with_capacity(2 * bounds.len() / LEAF_PARTS + 1),
-            order: keyed.into_iter().map(|(_, i)| i).collect(),
+            order: keys.iter().map(|&k| (k & index_mask) as usize).collect(),
         };
-        tree.build(bounds, &codes, 0, bounds.len());
+        tree.build(bounds, &keys, 0, bounds.len());
         Some(tree)
     }
 
-    /// Build the node over the parts `order[start..end]` (Morton codes
+    /// Build the node over the parts `order[start..end]` (their keys
     /// `codes`, sorted); returns its index. A node's box is its children's
     /// merged.
     fn build(&mut self, bounds: &[Bounds], codes: &[u64], start: usize, end: usize) -> usize {
@@ -129,22 +134,52 @@ impl PartTree {
     }
 }
 
-/// Where the run `codes[start..end]` (sorted, at least two) splits: at the
-/// first code with the highest bit in which the run's codes differ set —
-/// the cut of the octree cell they share, along its longest axis in the
-/// curve's order — so both halves are compact; in the middle when all the
-/// codes are equal.
+/// Where the run `codes[start..end]` (sorted, distinct, at least two)
+/// splits: at the first code with the highest bit in which the run's codes
+/// differ set — the cut of the octree cell they share, along its longest
+/// axis in the curve's order — so both halves are compact. Parts in one
+/// cell differ only in their index bits, which split the run by index.
 fn split(codes: &[u64], start: usize, end: usize) -> usize {
     let differ = codes[start] ^ codes[end - 1];
-    if differ == 0 {
-        return start + (end - start) / 2;
-    }
     let bit = 1u64 << (63 - differ.leading_zeros());
     start + codes[start..end].partition_point(|c| c & bit == 0)
 }
 
-/// Cells per axis of the Morton grid over the parts' box (21 bits each).
-const MORTON_CELLS: u32 = 1 << 21;
+/// Sort `keys` by their bits from `from_bit` up, stably (keys equal there
+/// keep their order): a least-significant-digit radix sort,
+/// [`RADIX_BITS`] bits a pass, skipping the digits every key shares.
+fn radix_sort(keys: &mut Vec<u64>, from_bit: u32) {
+    let mut spare = vec![0u64; keys.len()];
+    let mut starts = vec![0usize; 1 << RADIX_BITS];
+    let mut shift = from_bit;
+    while shift < u64::BITS {
+        let digit = |k: u64| ((k >> shift) as usize) & ((1 << RADIX_BITS) - 1);
+        starts.fill(0);
+        for &k in keys.iter() {
+            starts[digit(k)] += 1;
+        }
+        if !starts.contains(&keys.len()) {
+            let mut total = 0;
+            for start in starts.iter_mut() {
+                (*start, total) = (total, total + *start);
+            }
+            for &k in keys.iter() {
+                let d = digit(k);
+                spare[starts[d]] = k;
+                starts[d] += 1;
+            }
+            std::mem::swap(keys, &mut spare);
+        }
+        shift += RADIX_BITS;
+    }
+}
+
+/// Bits of the key sorted per pass of [`radix_sort`].
+const RADIX_BITS: u32 = 11;
+
+/// Most bits per axis of the Morton grid over the parts' box (fewer when
+/// the parts' indices need the room).
+const MORTON_AXIS_BITS: u32 = 21;
 
 /// The Morton code of a cell: the bits of `x`, `y` and `z` interleaved.
 fn morton(x: u32, y: u32, z: u32) -> u64 {
@@ -218,20 +253,39 @@ mod tests {
     }
 
     #[test]
+    fn the_radix_sort_orders_by_the_high_bits_and_keeps_ties_in_order() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        for (n, from_bit, spread) in [
+            (0, 0, 64),
+            (1, 5, 64),
+            (1000, 0, 64),
+            (5000, 13, 40),
+            (3000, 20, 30),
+        ] {
+            let keys: Vec<u64> = (0..n).map(|_| rng.gen::<u64>() >> (64 - spread)).collect();
+            let mut sorted = keys.clone();
+            radix_sort(&mut sorted, from_bit);
+            let mut expected = keys.clone();
+            expected.sort_by_key(|k| k.checked_shr(from_bit).unwrap_or(0));
+            assert_eq!(sorted, expected, "n {n}, from bit {from_bit}");
+        }
+    }
+
+    #[test]
     fn morton_codes_interleave_the_cell_bits() {
         assert_eq!(morton(1, 0, 0), 1);
         assert_eq!(morton(0, 1, 0), 2);
         assert_eq!(morton(0, 0, 1), 4);
         assert_eq!(morton(3, 0, 0), 0b1001);
-        let top = MORTON_CELLS - 1;
+        let top = (1u32 << MORTON_AXIS_BITS) - 1;
         assert_eq!(morton(top, top, top), (1u64 << 63) - 1);
         // Brute force on random cells: bit k of x lands at bit 3k.
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
         for _ in 0..100 {
             let (x, y, z) = (
-                rng.gen_range(0..MORTON_CELLS),
-                rng.gen_range(0..MORTON_CELLS),
-                rng.gen_range(0..MORTON_CELLS),
+                rng.gen_range(0..1u32 << MORTON_AXIS_BITS),
+                rng.gen_range(0..1u32 << MORTON_AXIS_BITS),
+                rng.gen_range(0..1u32 << MORTON_AXIS_BITS),
             );
             let expected = (0..21).fold(0u64, |code, k| {
                 code | (u64::from(x >> k & 1) << (3 * k))
