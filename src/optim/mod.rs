@@ -29,7 +29,7 @@
 //!   elimination of equality rows ([`qp::nullspace`]).
 //! - [`verify`] — dense verification, the continuous-motion certificate
 //!   ([`verify::continuous`]) and the trajectory output.
-//! - [`seeds`] — restarts from seeded prior draws after a local minimum, and
+//! - [`seeds`] — restarts from detours and seeded prior draws after a local minimum, and
 //!   the `samples: N` projected prior draws.
 //! - [`solution`] — [`Solution`], [`SolveStats`], [`SolveControl`];
 //!   [`report`] — the response types; [`tolerances`] — every tolerance and

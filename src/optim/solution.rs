@@ -76,7 +76,7 @@ pub struct SolveStats {
     pub evaluation_ms: f64,
     /// Wall time in dense verification (ms).
     pub verification_ms: f64,
-    /// Restarts from prior draws that ran (see [`restart`](super::seeds::restart)).
+    /// Restarts (detours and prior draws) that ran (see [`restart`](super::seeds::restart)).
     pub restarts: usize,
 }
 

@@ -41,7 +41,8 @@ use nalgebra::DVector;
 impl Problem {
     /// SCP towards the prior mean (the Mahalanobis-closest feasible weights).
     /// When that run ends without a feasible answer, it is restarted from
-    /// seeded prior draws (see [`restart`](crate::optim::seeds::restart)).
+    /// detours around the blocking obstacles and seeded prior draws (see
+    /// [`restart`](crate::optim::seeds::restart)).
     pub fn solve(&self, ctl: &SolveControl) -> Result<Solution> {
         let zero = DVector::zeros(self.whitening.dim());
         let first = self.run(&zero, &zero, self.options.max_iterations, ctl)?;

@@ -1,6 +1,8 @@
-//! Where the SCP starts besides the prior mean: [`restart`]s from seeded
-//! prior draws after a local minimum, and the `samples: N` projected draws of
+//! Where the SCP starts besides the prior mean: [`restart`]s from detours
+//! around the obstacles that block the mean and from seeded prior draws
+//! after a local minimum, and the `samples: N` projected draws of
 //! [`sampling`].
 
+mod detour;
 pub mod restart;
 pub mod sampling;

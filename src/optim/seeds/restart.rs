@@ -7,9 +7,11 @@
 //! violation (`max_iterations`: the penalty reached its cap, or the
 //! iteration limit). On the typical problems (`fixtures::typical`) most such
 //! problems are feasible: a run started elsewhere finds a feasible answer.
-//! So [`Problem::solve`] restarts `options.restarts` times, each run from a
-//! draw `z ~ N(0, I)` of the whitened prior (seeded by `options.seed`),
-//! still minimising the distance to the prior mean. The restarts run in
+//! So [`Problem::solve`] restarts `options.restarts` times, still
+//! minimising the distance to the prior mean: first from detours around the
+//! obstacles that block the mean (the prior conditioned to pass each on its
+//! near or far side, [`super::detour`]), then from draws `z ~ N(0, I)` of
+//! the whitened prior (seeded by `options.seed`) to make up the number. The restarts run in
 //! parallel and the answer is the closest `optimal` one (lowest cost, ties
 //! to the lower index), so it is the same whatever the thread count and
 //! whichever run finishes first. That answer is a local optimum found from
@@ -59,7 +61,7 @@ impl Problem {
         if first.status != Status::MaxIterations || restarts == 0 || ctl.stop_reason().is_some() {
             return Ok(first);
         }
-        let starts = self.restart_draws(restarts);
+        let starts = self.restart_starts(restarts, ctl);
         let mean = DVector::zeros(self.whitening.dim());
         let cap = self.options.max_iterations.min(RESTART_MAX_ITERATIONS);
         let began = std::time::Instant::now();
@@ -81,7 +83,7 @@ impl Problem {
         match (best, stopped) {
             (Some((k, sol)), _) => {
                 let mut note = format!(
-                    "the run from the prior mean found no feasible solution ({}); of {restarts} restarts from seeded prior draws, restart {} found the closest feasible one: a local optimum, a feasible solution closer to the prior may exist",
+                    "the run from the prior mean found no feasible solution ({}); of {restarts} restarts (detours around the blocking obstacles, then seeded prior draws), restart {} found the closest feasible one: a local optimum, a feasible solution closer to the prior may exist",
                     first.reason.as_deref().unwrap_or("no reason given"),
                     k + 1
                 );
@@ -93,15 +95,24 @@ impl Problem {
             (None, Some(why)) => Ok(spent.onto(first, format!("restarts stopped: {why}"))),
             (None, None) => {
                 let note = format!(
-                    "{restarts} restarts from seeded prior draws found no feasible solution either"
+                    "{restarts} restarts (detours around the blocking obstacles, then seeded prior draws) found no feasible solution either"
                 );
                 Ok(spent.onto(first, note))
             }
         }
     }
 
-    /// The `n` restart starts: draws `z ~ N(0, I)` of the whitened prior
-    /// from `options.seed`.
+    /// The `n` restart starts: the detours around the obstacles that block
+    /// the prior mean ([`Problem::detour_starts`]), then draws to make up
+    /// the number.
+    fn restart_starts(&self, n: usize, ctl: &SolveControl) -> Vec<DVector<f64>> {
+        let mut starts = self.detour_starts(n, ctl);
+        let draws = self.restart_draws(n);
+        starts.extend(draws.into_iter().take(n - starts.len()));
+        starts
+    }
+
+    /// `n` draws `z ~ N(0, I)` of the whitened prior from `options.seed`.
     fn restart_draws(&self, n: usize) -> Vec<DVector<f64>> {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(self.options.seed ^ RESTART_STREAM);
         let dim = self.whitening.dim();
