@@ -14,6 +14,37 @@ pub const MAX_RESTARTS: usize = 32;
 pub const MAX_ITERATIONS: usize = 1000;
 /// Largest accepted `duration_s`.
 pub const MAX_DURATION_S: f64 = 600.0;
+/// Largest accepted number of `via_points`.
+pub const MAX_VIA_POINTS: usize = 32;
+
+/// A configuration the trajectory passes through at a given time: ProMP
+/// via-point conditioning. It is an equality of the optimisation, so with
+/// nothing else binding the answer is the prior conditioned on it (and on
+/// the start), in closed form.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ViaConfiguration {
+    /// When, as a fraction of the motion's duration, in (0, 1); give this
+    /// or `time_s`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub phase: Option<f64>,
+    /// When, in seconds from the start, in (0, `duration_s`); give this or
+    /// `phase`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub time_s: Option<f64>,
+    /// The joint positions (rad) at that time, one per joint.
+    pub configuration: Vec<f64>,
+}
+
+impl ViaConfiguration {
+    /// The via point's phase for a motion of `duration_s` (`phase`, else
+    /// `time_s / duration_s`; NaN when neither is given).
+    pub fn phase_for(&self, duration_s: f64) -> f64 {
+        self.phase
+            .or(self.time_s.map(|t| t / duration_s))
+            .unwrap_or(f64::NAN)
+    }
+}
 
 /// Velocity and acceleration at the start and the end of the motion.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]

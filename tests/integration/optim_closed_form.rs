@@ -4,7 +4,7 @@
 use crate::common::requests::typical;
 use dpmp::fixtures::ExampleSettings;
 use dpmp::optim::problem::whiten::Whitening;
-use dpmp::optim::{OptimizeRequest, SolveControl, Status};
+use dpmp::optim::{Boundary, OptimizeRequest, SolveControl, Status, ViaConfiguration};
 use dpmp::promp::{ViaPoint, WeightDistribution};
 use dpmp::robot::Robot;
 use nalgebra::DMatrix;
@@ -17,6 +17,19 @@ fn convex_request(seed: u64) -> (Robot, OptimizeRequest) {
         ..Default::default()
     };
     typical(seed, &settings)
+}
+
+/// The prior the optimiser whitens: `Σ + λI` with the default `λ`.
+fn whitened_prior(prior: &WeightDistribution) -> WeightDistribution {
+    let n = prior.dim();
+    let lambda = Whitening::default_lambda(prior);
+    WeightDistribution::new(
+        prior.mean.clone(),
+        &prior.cov + DMatrix::identity(n, n) * lambda,
+        7,
+        8,
+    )
+    .unwrap()
 }
 
 #[test]
@@ -37,16 +50,7 @@ fn equality_only_optimum_is_gaussian_conditioning() {
     let sol = problem.solve(&SolveControl::default()).unwrap();
     assert_eq!(sol.status, Status::Optimal, "{:?}", sol.reason);
 
-    let prior = problem.prior();
-    let n = prior.dim();
-    let lambda = Whitening::default_lambda(prior);
-    let shifted = WeightDistribution::new(
-        prior.mean.clone(),
-        &prior.cov + DMatrix::identity(n, n) * lambda,
-        7,
-        8,
-    )
-    .unwrap();
+    let shifted = whitened_prior(problem.prior());
     let post = shifted
         .condition(
             problem.basis(),
@@ -76,6 +80,102 @@ fn equality_only_optimum_is_gaussian_conditioning() {
         (sol.mahalanobis - m_post).abs() < 1e-8,
         "{} vs {m_post}",
         sol.mahalanobis
+    );
+}
+
+/// Via configurations are ProMP via-point conditioning: with nothing else
+/// binding (no obstacles, no goal; free ends, so that a phase of the
+/// motion is the basis phase), the answer is the prior conditioned on the
+/// start and the via points, over several priors and via points (1e-8),
+/// whether a via point is given by `phase` or by `time_s`.
+#[test]
+fn via_configurations_are_gaussian_conditioning() {
+    for seed in [3u64, 7, 11, 19] {
+        let (robot, mut req) = convex_request(seed);
+        req.task.boundary = Boundary::Free;
+        let base = req.validate(&robot).unwrap();
+        let mean = base.prior().trajectory_mean(base.basis());
+        let phases = base.basis().phases().to_vec();
+        let wobble = |k: usize, j: usize| 0.02 * ((seed as f64 + 1.7 * j as f64 + k as f64).sin());
+        let at = |k: usize| -> Vec<f64> { (0..7).map(|j| mean[(k, j)] + wobble(k, j)).collect() };
+        let (k1, k2) = (phases.len() / 3 + seed as usize % 5, 2 * phases.len() / 3);
+        let start = at(0);
+        req.task.start = Some(start.clone());
+        req.task.via_points = vec![
+            ViaConfiguration {
+                phase: Some(phases[k1]),
+                time_s: None,
+                configuration: at(k1),
+            },
+            ViaConfiguration {
+                phase: None,
+                time_s: Some(phases[k2] * req.task.duration_s),
+                configuration: at(k2),
+            },
+        ];
+        let problem = req.validate(&robot).unwrap();
+        let sol = problem.solve(&SolveControl::default()).unwrap();
+        assert_eq!(sol.status, Status::Optimal, "seed {seed}: {:?}", sol.reason);
+        assert!(
+            sol.report.equality_error_rad < 1e-8,
+            "{}",
+            sol.report.equality_error_rad
+        );
+
+        let shifted = whitened_prior(problem.prior());
+        let via = |phase: f64, q: Vec<f64>| ViaPoint {
+            phase,
+            q,
+            noise_var: 0.0,
+        };
+        let post = shifted
+            .condition(
+                problem.basis(),
+                &[
+                    via(0.0, start),
+                    via(phases[k1], at(k1)),
+                    via(phases[k2], at(k2)),
+                ],
+            )
+            .unwrap();
+        let worst = largest_position_gap(
+            &problem.trajectory(&sol.weights),
+            &problem.trajectory(post.mean.as_slice()),
+        );
+        assert!(worst < 1e-8, "seed {seed}: {worst:e} rad from conditioning");
+    }
+}
+
+/// With the default rest-to-rest timing a via point holds at its time: the
+/// trajectory's sample at that time is the via configuration.
+#[test]
+fn a_rest_to_rest_trajectory_passes_its_via_configuration_at_its_time() {
+    let (robot, mut req) = convex_request(5);
+    let base = req.validate(&robot).unwrap();
+    let mean = base.prior().trajectory_mean(base.basis());
+    let k = base.basis().phases().len() / 2;
+    let q: Vec<f64> = (0..7).map(|j| mean[(k, j)] + 0.03).collect();
+    req.task.via_points = vec![ViaConfiguration {
+        phase: None,
+        time_s: Some(base.basis().phases()[k] * req.task.duration_s),
+        configuration: q.clone(),
+    }];
+    let problem = req.validate(&robot).unwrap();
+    let sol = problem.solve(&SolveControl::default()).unwrap();
+    assert_eq!(sol.status, Status::Optimal, "{:?}", sol.reason);
+    let trajectory = problem.trajectory(&sol.weights);
+    for (a, b) in trajectory.points[k].positions.iter().zip(&q) {
+        assert!((a - b).abs() < 1e-8, "{a} vs {b}");
+    }
+    // Outside the joint limits: diagnosed, naming the via point.
+    let mut outside = req.clone();
+    outside.task.via_points[0].configuration[3] = 3.0;
+    let answer = dpmp::optim::optimize(&outside, &robot).unwrap();
+    assert_eq!(answer.status, Status::Infeasible);
+    let reason = answer.reason.unwrap_or_default();
+    assert!(
+        reason.contains("via_points[0].configuration[3]"),
+        "{reason}"
     );
 }
 

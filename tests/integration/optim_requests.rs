@@ -104,6 +104,65 @@ fn bad_input_names_the_field() {
         "{}",
         field_of(&r, &robot)
     );
+    // Via points: one time each, inside the motion, a finite configuration
+    // of the robot's size, no two at once.
+    let via = |phase: Option<f64>, time_s: Option<f64>, configuration: Vec<f64>| {
+        dpmp::optim::ViaConfiguration {
+            phase,
+            time_s,
+            configuration,
+        }
+    };
+    let q = vec![0.0; 7];
+    for (points, field) in [
+        (vec![via(Some(0.5), Some(1.0), q.clone())], "via_points[0]"),
+        (vec![via(None, None, q.clone())], "via_points[0]"),
+        (vec![via(Some(1.0), None, q.clone())], "via_points[0].phase"),
+        (
+            vec![via(Some(f64::NAN), None, q.clone())],
+            "via_points[0].phase",
+        ),
+        (
+            vec![via(None, Some(4.0), q.clone())],
+            "via_points[0].time_s",
+        ),
+        (
+            vec![via(None, Some(-0.1), q.clone())],
+            "via_points[0].time_s",
+        ),
+        (
+            vec![via(Some(0.5), None, vec![0.0; 6])],
+            "via_points[0].configuration",
+        ),
+        (
+            vec![
+                via(Some(0.2), None, q.clone()),
+                via(
+                    Some(0.5),
+                    None,
+                    vec![0.0, f64::INFINITY, 0.0, 0.0, 0.0, 0.0, 0.0],
+                ),
+            ],
+            "via_points[1].configuration[1]",
+        ),
+        (
+            vec![
+                via(Some(0.5), None, q.clone()),
+                via(None, Some(2.0), q.clone()),
+            ],
+            "via_points[1]",
+        ),
+        (
+            (0..33)
+                .map(|k| via(Some((k as f64 + 1.0) / 40.0), None, q.clone()))
+                .collect(),
+            "via_points",
+        ),
+    ] {
+        let mut r = base.clone();
+        r.task.via_points = points;
+        assert_eq!(field_of(&r, &robot), field);
+    }
     // Unknown fields and malformed JSON are rejected by serde.
     let json = serde_json::to_value(&base).unwrap();
     let mut extra = json.clone();

@@ -26,6 +26,12 @@ impl Problem {
                 return Some(r);
             }
         }
+        for (k, q) in self.linear.via.iter().enumerate() {
+            let field = format!("via_points[{k}].configuration");
+            if let Some(r) = self.outside_limits(&field, q) {
+                return Some(r);
+            }
+        }
         self.goal_problem()
     }
 

@@ -66,6 +66,9 @@ pub struct LinearSet {
     pub start: Option<Vec<f64>>,
     /// Required configuration at phase 1.
     pub final_configuration: Option<Vec<f64>>,
+    /// Required configurations at the via points' phases (the `ends` rows
+    /// from index 2 on, in the request's order).
+    pub via: Vec<Vec<f64>>,
     /// Velocity and acceleration zero at both ends (checked; the timing
     /// makes it hold).
     pub rest: bool,
@@ -247,9 +250,9 @@ impl LinearSet {
     }
 
     /// The derivatives each end must hold at a value: position at the
-    /// start / final configuration, velocity and acceleration at zero when
-    /// the motion is rest-to-rest. `(phase index in ends, derivative,
-    /// target per joint)`.
+    /// start / final configuration and at each via point, velocity and
+    /// acceleration at zero at both ends when the motion is rest-to-rest.
+    /// `(phase index in ends, derivative, target per joint)`.
     fn end_conditions(&self, n_joints: usize) -> Vec<(usize, Derivative, Vec<f64>)> {
         let mut out = Vec::new();
         for (p, target) in [(0, &self.start), (1, &self.final_configuration)] {
@@ -262,11 +265,14 @@ impl LinearSet {
                 }
             }
         }
+        for (k, q) in self.via.iter().enumerate() {
+            out.push((2 + k, Derivative::Position, q.clone()));
+        }
         out
     }
 
     /// Equalities `a·z = b` for the start and final configuration at
-    /// `ends` (phases 0 and 1). Rest needs no row: the resting timing
+    /// `ends` (phases 0 and 1) and the via points (the phases after them). Rest needs no row: the resting timing
     /// ([`TimeWarp`](crate::optim::problem::phases::TimeWarp)) makes every trajectory rest
     /// at the ends; [`LinearSet::equality_error`] still checks it.
     pub fn equalities(&self, ends: &PhaseRows, mean: &DVector<f64>) -> Vec<(DVector<f64>, f64)> {
@@ -374,6 +380,7 @@ mod tests {
             jerk: Some(vec![30.0; 7]),
             start: None,
             final_configuration: None,
+            via: Vec::new(),
             rest: true,
             bound_weights: false,
         };

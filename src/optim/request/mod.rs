@@ -8,7 +8,7 @@ pub use validate::check_prior;
 pub(crate) use validate::validate_spec;
 
 pub use super::report::TrajectoryFormat;
-use super::task::{Boundary, Goal, SolverOptions};
+use super::task::{Boundary, Goal, SolverOptions, ViaConfiguration};
 use crate::promp::annotation::JointAnnotation;
 use crate::promp::PrompConfig;
 use crate::scene::Obstacle;
@@ -84,6 +84,9 @@ task_and_wire_request! {
         /// Required TCP position at the end.
         #[serde(default)]
         pub goal: Option<Goal>,
+        /// Configurations the trajectory passes through (exactly) on its way.
+        #[serde(default, skip_serializing_if = "Vec::is_empty")]
+        pub via_points: Vec<ViaConfiguration>,
         /// The scene.
         #[serde(default)]
         pub obstacles: Vec<Obstacle>,
@@ -132,6 +135,7 @@ impl Default for Task {
             duration_s: default_duration(),
             start: None,
             goal: None,
+            via_points: Vec::new(),
             obstacles: Vec::new(),
             clearance_m: default_clearance(),
             joint_limit_margin_rad: 0.0,

@@ -13,8 +13,8 @@ use crate::optim::problem::phases::{PhaseRows, TimeWarp};
 use crate::optim::problem::whiten::Whitening;
 use crate::optim::problem::Problem;
 use crate::optim::task::{
-    Boundary, Goal, SolverOptions, DEFAULT_ACTIVATION_MARGIN_M, MAX_DURATION_S, MAX_ITERATIONS,
-    MAX_RESTARTS,
+    Boundary, Goal, SolverOptions, ViaConfiguration, DEFAULT_ACTIVATION_MARGIN_M, MAX_DURATION_S,
+    MAX_ITERATIONS, MAX_RESTARTS, MAX_VIA_POINTS,
 };
 use crate::promp::annotation::{prior_from_joints, REPAIR_FLOOR_RELATIVE};
 use crate::promp::basis::phase_grid;
@@ -95,7 +95,11 @@ impl Task {
         };
         let timing = (self.duration_s, warp);
         let grid = PhaseRows::new(&basis, &whitening, robot.dof(), timing, basis.phases());
-        let ends = PhaseRows::new(&basis, &whitening, robot.dof(), timing, &[0.0, 1.0]);
+        let end_phases: Vec<f64> = [0.0, 1.0]
+            .into_iter()
+            .chain(self.via_points.iter().map(|v| v.phase_for(self.duration_s)))
+            .collect();
+        let ends = PhaseRows::new(&basis, &whitening, robot.dof(), timing, &end_phases);
         let dense_config = PrompConfig {
             n_samples: self.promp.n_samples * self.options.verify_factor,
             ..self.promp.clone()
@@ -169,6 +173,7 @@ impl Task {
         if let Some(goal) = &self.goal {
             check_goal(goal)?;
         }
+        check_via_points(&self.via_points, self.duration_s, robot)?;
         check_scaling("velocity_scaling", self.velocity_scaling)?;
         check_scaling("acceleration_scaling", self.acceleration_scaling)?;
         for (field, limits) in [
@@ -342,9 +347,67 @@ fn joint_bounds(robot: &Robot, margin: f64, req: &Task) -> Result<LinearSet> {
         jerk: rate_limits(req.jerk_limits.as_deref(), limits.iter().map(|l| l.jerk)),
         start: req.start.clone(),
         final_configuration: req.options.final_configuration.clone(),
+        via: req
+            .via_points
+            .iter()
+            .map(|v| v.configuration.clone())
+            .collect(),
         rest: req.boundary == Boundary::Rest,
         bound_weights: req.options.bound_weights,
     })
+}
+
+/// Via points: at most [`MAX_VIA_POINTS`], each with exactly one of
+/// `phase` (in (0, 1)) and `time_s` (in (0, `duration_s`)), a finite
+/// configuration of the robot's size, and no two at the same time (to
+/// 1e-9 of the motion).
+fn check_via_points(via: &[ViaConfiguration], duration_s: f64, robot: &Robot) -> Result<()> {
+    if via.len() > MAX_VIA_POINTS {
+        return Err(Error::invalid(
+            "via_points",
+            format!("at most {MAX_VIA_POINTS} via points, got {}", via.len()),
+        ));
+    }
+    let mut phases: Vec<(f64, usize)> = Vec::with_capacity(via.len());
+    for (i, v) in via.iter().enumerate() {
+        let field = |name: &str| format!("via_points[{i}].{name}");
+        match (v.phase, v.time_s) {
+            (Some(_), Some(_)) | (None, None) => {
+                return Err(Error::invalid(
+                    format!("via_points[{i}]"),
+                    "give exactly one of `phase` and `time_s`",
+                ))
+            }
+            (Some(p), None) => check_open("phase", &field("phase"), p, 1.0)?,
+            (None, Some(t)) => check_open("time", &field("time_s"), t, duration_s)?,
+        }
+        robot.validate_configuration(&field("configuration"), &v.configuration)?;
+        phases.push((v.phase_for(duration_s), i));
+    }
+    phases.sort_by(|a, b| a.0.total_cmp(&b.0));
+    for pair in phases.windows(2) {
+        if pair[1].0 - pair[0].0 < 1e-9 {
+            return Err(Error::invalid(
+                format!("via_points[{}]", pair[1].1.max(pair[0].1)),
+                format!(
+                    "at the same time as via_points[{}]",
+                    pair[1].1.min(pair[0].1)
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// `value` strictly between 0 and `end` (the motion's interior).
+fn check_open(what: &str, field: &str, value: f64, end: f64) -> Result<()> {
+    if value.is_finite() && value > 0.0 && value < end {
+        return Ok(());
+    }
+    Err(Error::invalid(
+        field,
+        format!("the {what} must lie strictly inside (0, {end}), got {value}"),
+    ))
 }
 
 /// The request's limits, else the robot's (a joint without one is
