@@ -60,7 +60,7 @@ pub use report::{
 };
 pub use request::{OptimizeRequest, PriorSpec, Task};
 pub use solution::{Solution, SolveControl, SolveStats};
-pub use task::{Boundary, Goal, GoalApproach, InnerSolver, SolverOptions, ViaConfiguration};
+pub use task::{Boundary, Goal, GoalApproach, InnerSolver, SolverOptions, Waypoint};
 pub use tolerances::FEASIBILITY_TOLERANCE;
 
 use crate::promp::{Basis, WeightDistribution};

@@ -217,6 +217,11 @@ pub struct TrajectoryReport {
     /// Angle (rad) between the gripper's z axis at the end and
     /// `goal.approach_axis`; `None` without an approach axis.
     pub goal_angle_error_rad: Option<f64>,
+    /// Largest distance (m) of the TCP from a position waypoint beyond its
+    /// `tolerance_m` (≤ 0 when every one is met); `None` without position
+    /// waypoints.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub via_position_excess_m: Option<f64>,
     /// SCP iterations (QPs solved) that produced this trajectory.
     pub iterations: usize,
     /// Wall-clock solve time (ms); not deterministic.

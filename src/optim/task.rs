@@ -17,13 +17,14 @@ pub const MAX_DURATION_S: f64 = 600.0;
 /// Largest accepted number of `via_points`.
 pub const MAX_VIA_POINTS: usize = 32;
 
-/// A configuration the trajectory passes through at a given time: ProMP
-/// via-point conditioning. It is an equality of the optimisation, so with
-/// nothing else binding the answer is the prior conditioned on it (and on
-/// the start), in closed form.
+/// A point the trajectory passes at a given time: a configuration
+/// (exactly: ProMP via-point conditioning, an equality of the optimisation,
+/// so with nothing else binding the answer is the prior conditioned on it
+/// and on the start, in closed form) or a TCP position (within
+/// `tolerance_m`, linearised like the goal).
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
-pub struct ViaConfiguration {
+pub struct Waypoint {
     /// When, as a fraction of the motion's duration, in (0, 1); give this
     /// or `time_s`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -32,12 +33,25 @@ pub struct ViaConfiguration {
     /// `phase`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub time_s: Option<f64>,
-    /// The joint positions (rad) at that time, one per joint.
-    pub configuration: Vec<f64>,
+    /// The joint positions (rad) at that time, one per joint; give this or
+    /// `position`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub configuration: Option<Vec<f64>>,
+    /// The TCP position (m, base frame) at that time; give this or
+    /// `configuration`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub position: Option<[f64; 3]>,
+    /// Allowed distance (m) from `position` (default
+    /// [`DEFAULT_WAYPOINT_TOLERANCE_M`]); only with `position`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tolerance_m: Option<f64>,
 }
 
-impl ViaConfiguration {
-    /// The via point's phase for a motion of `duration_s` (`phase`, else
+/// Default `via_points[i].tolerance_m` of a position (m).
+pub const DEFAULT_WAYPOINT_TOLERANCE_M: f64 = 0.005;
+
+impl Waypoint {
+    /// The waypoint's phase for a motion of `duration_s` (`phase`, else
     /// `time_s / duration_s`; NaN when neither is given).
     pub fn phase_for(&self, duration_s: f64) -> f64 {
         self.phase

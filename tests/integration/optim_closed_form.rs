@@ -4,7 +4,7 @@
 use crate::common::requests::typical;
 use dpmp::fixtures::ExampleSettings;
 use dpmp::optim::problem::whiten::Whitening;
-use dpmp::optim::{Boundary, OptimizeRequest, SolveControl, Status, ViaConfiguration};
+use dpmp::optim::{Boundary, OptimizeRequest, SolveControl, Status, Waypoint};
 use dpmp::promp::{ViaPoint, WeightDistribution};
 use dpmp::robot::Robot;
 use nalgebra::DMatrix;
@@ -102,15 +102,15 @@ fn via_configurations_are_gaussian_conditioning() {
         let start = at(0);
         req.task.start = Some(start.clone());
         req.task.via_points = vec![
-            ViaConfiguration {
+            Waypoint {
                 phase: Some(phases[k1]),
-                time_s: None,
-                configuration: at(k1),
+                configuration: Some(at(k1)),
+                ..waypoint()
             },
-            ViaConfiguration {
-                phase: None,
+            Waypoint {
                 time_s: Some(phases[k2] * req.task.duration_s),
-                configuration: at(k2),
+                configuration: Some(at(k2)),
+                ..waypoint()
             },
         ];
         let problem = req.validate(&robot).unwrap();
@@ -155,10 +155,10 @@ fn a_rest_to_rest_trajectory_passes_its_via_configuration_at_its_time() {
     let mean = base.prior().trajectory_mean(base.basis());
     let k = base.basis().phases().len() / 2;
     let q: Vec<f64> = (0..7).map(|j| mean[(k, j)] + 0.03).collect();
-    req.task.via_points = vec![ViaConfiguration {
-        phase: None,
+    req.task.via_points = vec![Waypoint {
         time_s: Some(base.basis().phases()[k] * req.task.duration_s),
-        configuration: q.clone(),
+        configuration: Some(q.clone()),
+        ..waypoint()
     }];
     let problem = req.validate(&robot).unwrap();
     let sol = problem.solve(&SolveControl::default()).unwrap();
@@ -169,7 +169,7 @@ fn a_rest_to_rest_trajectory_passes_its_via_configuration_at_its_time() {
     }
     // Outside the joint limits: diagnosed, naming the via point.
     let mut outside = req.clone();
-    outside.task.via_points[0].configuration[3] = 3.0;
+    outside.task.via_points[0].configuration.as_mut().unwrap()[3] = 3.0;
     let answer = dpmp::optim::optimize(&outside, &robot).unwrap();
     assert_eq!(answer.status, Status::Infeasible);
     let reason = answer.reason.unwrap_or_default();
@@ -177,6 +177,69 @@ fn a_rest_to_rest_trajectory_passes_its_via_configuration_at_its_time() {
         reason.contains("via_points[0].configuration[3]"),
         "{reason}"
     );
+}
+
+/// A waypoint with no time, place or tolerance yet.
+fn waypoint() -> Waypoint {
+    Waypoint {
+        phase: None,
+        time_s: None,
+        configuration: None,
+        position: None,
+        tolerance_m: None,
+    }
+}
+
+/// A TCP position waypoint bends the path through it: the answer is
+/// `optimal`, its TCP at that time is within the tolerance (forward
+/// kinematics of the returned trajectory, not the solver's own figure),
+/// and a waypoint the prior mean already meets changes nothing.
+#[test]
+fn a_position_waypoint_is_met_at_its_time_and_a_met_one_changes_nothing() {
+    let robot = Robot::panda().unwrap();
+    let (_, mut req) = convex_request(5);
+    let plain = req.validate(&robot).unwrap();
+    let free = plain.solve(&SolveControl::default()).unwrap();
+    assert_eq!(free.status, Status::Optimal);
+    let k = plain.basis().phases().len() / 2;
+    let q_mid = plain.trajectory(&free.weights).points[k].positions.clone();
+    let tcp = robot.tcp_pose(&q_mid).translation.vector;
+
+    // 3 cm sideways, within 5 mm.
+    let target = [tcp.x, tcp.y + 0.03, tcp.z];
+    req.task.via_points = vec![Waypoint {
+        phase: Some(plain.basis().phases()[k]),
+        position: Some(target),
+        tolerance_m: Some(0.005),
+        ..waypoint()
+    }];
+    let problem = req.validate(&robot).unwrap();
+    let sol = problem.solve(&SolveControl::default()).unwrap();
+    assert_eq!(sol.status, Status::Optimal, "{:?}", sol.reason);
+    let excess = sol.report.via_position_excess_m.unwrap();
+    assert!(excess <= 1e-6, "{excess}");
+    let q = &problem.trajectory(&sol.weights).points[k].positions;
+    let reached = robot.tcp_pose(q).translation.vector;
+    let miss = (reached - nalgebra::Vector3::from(target)).norm();
+    assert!(miss <= 0.005 + 1e-6, "{miss} m from the waypoint");
+    assert!(sol.mahalanobis > free.mahalanobis);
+
+    // Already met (the free answer's own TCP, 1 cm tolerance): same answer.
+    req.task.via_points[0].position = Some(tcp.into());
+    req.task.via_points[0].tolerance_m = Some(0.01);
+    let met = req
+        .validate(&robot)
+        .unwrap()
+        .solve(&SolveControl::default())
+        .unwrap();
+    assert_eq!(met.status, Status::Optimal);
+    let gap = met
+        .weights
+        .iter()
+        .zip(&free.weights)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
+    assert!(gap < 1e-6, "{gap}");
 }
 
 #[test]

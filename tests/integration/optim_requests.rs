@@ -105,16 +105,45 @@ fn bad_input_names_the_field() {
         field_of(&r, &robot)
     );
     // Via points: one time each, inside the motion, a finite configuration
-    // of the robot's size, no two at once.
-    let via = |phase: Option<f64>, time_s: Option<f64>, configuration: Vec<f64>| {
-        dpmp::optim::ViaConfiguration {
+    // of the robot's size or a TCP position near the robot with a positive
+    // tolerance, no two at once.
+    let q = vec![0.0; 7];
+    let via =
+        |phase: Option<f64>, time_s: Option<f64>, configuration: Vec<f64>| dpmp::optim::Waypoint {
             phase,
             time_s,
-            configuration,
-        }
+            configuration: Some(configuration),
+            position: None,
+            tolerance_m: None,
+        };
+    let at = |position: [f64; 3], tolerance_m: Option<f64>| dpmp::optim::Waypoint {
+        phase: Some(0.5),
+        time_s: None,
+        configuration: None,
+        position: Some(position),
+        tolerance_m,
     };
-    let q = vec![0.0; 7];
+    let mut both = at([0.5, 0.0, 0.5], None);
+    both.configuration = Some(q.clone());
+    let neither = dpmp::optim::Waypoint {
+        position: None,
+        ..at([0.5, 0.0, 0.5], None)
+    };
+    let mut tolerant = via(Some(0.5), None, q.clone());
+    tolerant.tolerance_m = Some(0.01);
     for (points, field) in [
+        (vec![both], "via_points[0]"),
+        (vec![neither], "via_points[0]"),
+        (vec![tolerant], "via_points[0].tolerance_m"),
+        (
+            vec![at([0.5, f64::NAN, 0.5], None)],
+            "via_points[0].position[1]",
+        ),
+        (vec![at([20.0, 0.0, 0.5], None)], "via_points[0].position"),
+        (
+            vec![at([0.5, 0.0, 0.5], Some(0.0))],
+            "via_points[0].tolerance_m",
+        ),
         (vec![via(Some(0.5), Some(1.0), q.clone())], "via_points[0]"),
         (vec![via(None, None, q.clone())], "via_points[0]"),
         (vec![via(Some(1.0), None, q.clone())], "via_points[0].phase"),

@@ -26,8 +26,8 @@ impl Problem {
                 return Some(r);
             }
         }
-        for (k, q) in self.linear.via.iter().enumerate() {
-            let field = format!("via_points[{k}].configuration");
+        for (p, q) in &self.linear.via {
+            let field = format!("via_points[{}].configuration", p - 2);
             if let Some(r) = self.outside_limits(&field, q) {
                 return Some(r);
             }

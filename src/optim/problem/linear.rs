@@ -66,9 +66,9 @@ pub struct LinearSet {
     pub start: Option<Vec<f64>>,
     /// Required configuration at phase 1.
     pub final_configuration: Option<Vec<f64>>,
-    /// Required configurations at the via points' phases (the `ends` rows
-    /// from index 2 on, in the request's order).
-    pub via: Vec<Vec<f64>>,
+    /// Required configurations at waypoints: `(index in the ends rows,
+    /// configuration)`.
+    pub via: Vec<(usize, Vec<f64>)>,
     /// Velocity and acceleration zero at both ends (checked; the timing
     /// makes it hold).
     pub rest: bool,
@@ -265,8 +265,8 @@ impl LinearSet {
                 }
             }
         }
-        for (k, q) in self.via.iter().enumerate() {
-            out.push((2 + k, Derivative::Position, q.clone()));
+        for (p, q) in &self.via {
+            out.push((*p, Derivative::Position, q.clone()));
         }
         out
     }

@@ -14,7 +14,7 @@ use crate::optim::tolerances::FEASIBILITY_TOLERANCE;
 use crate::promp::{Basis, WeightDistribution};
 use crate::robot::Robot;
 use crate::scene::Scene;
-use nalgebra::{DMatrix, DVector};
+use nalgebra::{DMatrix, DVector, Vector3};
 
 /// A validated request: prior, whitening, robot, scene and constraints.
 /// `Clone + Send + Sync`; solving does not mutate it.
@@ -37,6 +37,8 @@ pub struct Problem {
     pub(crate) clearance_m: f64,
     pub(crate) activation_m: f64,
     pub(crate) goal: Option<Goal>,
+    /// The TCP positions of the request's position waypoints.
+    pub(crate) via_positions: Vec<ViaPosition>,
     pub(crate) options: SolverOptions,
     pub(crate) duration: f64,
     /// How the phase advances with time (rest-to-rest or free ends).
@@ -115,6 +117,8 @@ impl Problem {
             (Some(_), None) => false,
             (None, _) => true,
         };
+        let via_ok =
+            self.via_positions.is_empty() || report.via_position_excess_m.is_some_and(|e| e <= tol);
         let ratio_ok = |r: Option<f64>| r.is_none_or(|r| r <= 1.0 + tol);
         // An interrupted verification has no clearance figures: never feasible.
         let clearance_checked = self.scene.is_empty()
@@ -125,6 +129,7 @@ impl Problem {
             && clear_ok
             && goal_ok
             && approach_ok
+            && via_ok
             && report.max_joint_limit_violation_rad <= tol
             && report.max_velocity_ratio <= 1.0 + tol
             && ratio_ok(report.max_acceleration_ratio)
@@ -132,4 +137,18 @@ impl Problem {
             && report.equality_error_rad <= tol
             && report.weight_bound_excess <= tol
     }
+}
+
+/// A TCP position the trajectory passes within `tolerance_m` at one of the
+/// `ends` phases (a position waypoint of the request).
+#[derive(Clone, Debug)]
+pub(crate) struct ViaPosition {
+    /// Index in the request's `via_points`.
+    pub(crate) index: usize,
+    /// Index of its phase in the problem's `ends` rows.
+    pub(crate) ends: usize,
+    /// Target TCP position (m, base frame).
+    pub(crate) position: Vector3<f64>,
+    /// Allowed distance (m).
+    pub(crate) tolerance_m: f64,
 }

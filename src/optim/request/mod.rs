@@ -8,7 +8,7 @@ pub use validate::check_prior;
 pub(crate) use validate::validate_spec;
 
 pub use super::report::TrajectoryFormat;
-use super::task::{Boundary, Goal, SolverOptions, ViaConfiguration};
+use super::task::{Boundary, Goal, SolverOptions, Waypoint};
 use crate::promp::annotation::JointAnnotation;
 use crate::promp::PrompConfig;
 use crate::scene::Obstacle;
@@ -86,7 +86,7 @@ task_and_wire_request! {
         pub goal: Option<Goal>,
         /// Configurations the trajectory passes through (exactly) on its way.
         #[serde(default, skip_serializing_if = "Vec::is_empty")]
-        pub via_points: Vec<ViaConfiguration>,
+        pub via_points: Vec<Waypoint>,
         /// The scene.
         #[serde(default)]
         pub obstacles: Vec<Obstacle>,

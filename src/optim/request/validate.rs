@@ -11,10 +11,10 @@ use crate::error::{ensure_finite, ensure_in_range as check_range, ensure_positiv
 use crate::optim::problem::linear::LinearSet;
 use crate::optim::problem::phases::{PhaseRows, TimeWarp};
 use crate::optim::problem::whiten::Whitening;
-use crate::optim::problem::Problem;
+use crate::optim::problem::{Problem, ViaPosition};
 use crate::optim::task::{
-    Boundary, Goal, SolverOptions, ViaConfiguration, DEFAULT_ACTIVATION_MARGIN_M, MAX_DURATION_S,
-    MAX_ITERATIONS, MAX_RESTARTS, MAX_VIA_POINTS,
+    Boundary, Goal, SolverOptions, Waypoint, DEFAULT_ACTIVATION_MARGIN_M,
+    DEFAULT_WAYPOINT_TOLERANCE_M, MAX_DURATION_S, MAX_ITERATIONS, MAX_RESTARTS, MAX_VIA_POINTS,
 };
 use crate::promp::annotation::{prior_from_joints, REPAIR_FLOOR_RELATIVE};
 use crate::promp::basis::phase_grid;
@@ -131,6 +131,19 @@ impl Task {
             clearance_m: self.clearance_m,
             activation_m,
             goal: self.goal.clone(),
+            via_positions: self
+                .via_points
+                .iter()
+                .enumerate()
+                .filter_map(|(i, v)| {
+                    Some(ViaPosition {
+                        index: i,
+                        ends: 2 + i,
+                        position: Vector3::from(v.position?),
+                        tolerance_m: v.tolerance_m.unwrap_or(DEFAULT_WAYPOINT_TOLERANCE_M),
+                    })
+                })
+                .collect(),
             options: self.options.clone(),
             duration: self.duration_s,
             warp,
@@ -350,7 +363,8 @@ fn joint_bounds(robot: &Robot, margin: f64, req: &Task) -> Result<LinearSet> {
         via: req
             .via_points
             .iter()
-            .map(|v| v.configuration.clone())
+            .enumerate()
+            .filter_map(|(i, v)| Some((2 + i, v.configuration.clone()?)))
             .collect(),
         rest: req.boundary == Boundary::Rest,
         bound_weights: req.options.bound_weights,
@@ -358,10 +372,12 @@ fn joint_bounds(robot: &Robot, margin: f64, req: &Task) -> Result<LinearSet> {
 }
 
 /// Via points: at most [`MAX_VIA_POINTS`], each with exactly one of
-/// `phase` (in (0, 1)) and `time_s` (in (0, `duration_s`)), a finite
-/// configuration of the robot's size, and no two at the same time (to
-/// 1e-9 of the motion).
-fn check_via_points(via: &[ViaConfiguration], duration_s: f64, robot: &Robot) -> Result<()> {
+/// `phase` (in (0, 1)) and `time_s` (in (0, `duration_s`)), exactly one of
+/// a finite configuration of the robot's size and a finite TCP position
+/// within [`MAX_WAYPOINT_DISTANCE_M`] of the base (with its `tolerance_m`
+/// in [1e-6, 1] m; none with a configuration), and no two at the same time
+/// (to 1e-9 of the motion).
+fn check_via_points(via: &[Waypoint], duration_s: f64, robot: &Robot) -> Result<()> {
     if via.len() > MAX_VIA_POINTS {
         return Err(Error::invalid(
             "via_points",
@@ -381,7 +397,37 @@ fn check_via_points(via: &[ViaConfiguration], duration_s: f64, robot: &Robot) ->
             (Some(p), None) => check_open("phase", &field("phase"), p, 1.0)?,
             (None, Some(t)) => check_open("time", &field("time_s"), t, duration_s)?,
         }
-        robot.validate_configuration(&field("configuration"), &v.configuration)?;
+        match (&v.configuration, &v.position) {
+            (Some(q), None) => {
+                robot.validate_configuration(&field("configuration"), q)?;
+                if v.tolerance_m.is_some() {
+                    return Err(Error::invalid(
+                        field("tolerance_m"),
+                        "a configuration is met exactly: `tolerance_m` goes only with `position`",
+                    ));
+                }
+            }
+            (None, Some(p)) => {
+                ensure_finite(&field("position"), p)?;
+                let norm = Vector3::from(*p).norm();
+                if norm > MAX_WAYPOINT_DISTANCE_M {
+                    return Err(Error::invalid(
+                        field("position"),
+                        format!(
+                            "must lie within {MAX_WAYPOINT_DISTANCE_M} m of the base, got {norm} m"
+                        ),
+                    ));
+                }
+                let tolerance = v.tolerance_m.unwrap_or(DEFAULT_WAYPOINT_TOLERANCE_M);
+                check_range(&field("tolerance_m"), tolerance, 1e-6, 1.0)?;
+            }
+            _ => {
+                return Err(Error::invalid(
+                    format!("via_points[{i}]"),
+                    "give exactly one of `configuration` and `position`",
+                ))
+            }
+        }
         phases.push((v.phase_for(duration_s), i));
     }
     phases.sort_by(|a, b| a.0.total_cmp(&b.0));
@@ -398,6 +444,9 @@ fn check_via_points(via: &[ViaConfiguration], duration_s: f64, robot: &Robot) ->
     }
     Ok(())
 }
+
+/// Farthest a waypoint's TCP position may lie from the base (m).
+const MAX_WAYPOINT_DISTANCE_M: f64 = 10.0;
 
 /// `value` strictly between 0 and `end` (the motion's interior).
 fn check_open(what: &str, field: &str, value: f64, end: f64) -> Result<()> {

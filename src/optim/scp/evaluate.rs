@@ -25,6 +25,8 @@ pub(in crate::optim) struct GridEval {
     /// Σ max(0, clearance_m - d) + goal excess: what must reach zero.
     pub(in crate::optim) true_violation: f64,
     pub(in crate::optim) goal: Option<GoalEval>,
+    /// The position waypoints, in the problem's order.
+    pub(in crate::optim) via: Vec<GoalEval>,
     pub(in crate::optim) linear_ok: bool,
     /// The caller's deadline or cancel flag stopped the clearance pass:
     /// the pairs are incomplete, so the iterate is never accepted.
@@ -71,7 +73,8 @@ impl GridEval {
     }
 
     pub(in crate::optim) fn goal_excess(&self) -> f64 {
-        self.goal.as_ref().map_or(0.0, |g| {
+        let via: f64 = self.via.iter().map(|v| v.buffered_excess).sum();
+        via + self.goal.as_ref().map_or(0.0, |g| {
             g.buffered_excess + g.approach.as_ref().map_or(0.0, |a| a.buffered_excess)
         })
     }
@@ -127,23 +130,20 @@ impl Problem {
             truth += (self.clearance_m - c.distance).max(0.0);
         }
         let goal = self.goal.as_ref().map(|g| {
-            let q = self.ends.position(1, &w);
-            let pose = self.robot.tcp_pose(&q);
-            let residual = pose.translation.vector - Vector3::from(g.position);
-            let excess = (residual.norm() - g.tolerance_m).max(0.0);
-            let buffered_excess = (residual.norm() - buffered_tolerance(g.tolerance_m)).max(0.0);
-            let approach = self.approach_eval(&q, &pose.rotation);
-            GoalEval {
-                q,
-                residual,
-                excess,
-                buffered_excess,
-                approach,
-            }
+            let (mut eval, rotation) =
+                self.tcp_eval(&w, 1, &Vector3::from(g.position), g.tolerance_m);
+            eval.approach = self.approach_eval(&eval.q, &rotation);
+            eval
         });
-        let goal_excess = goal.as_ref().map_or(0.0, |g| {
-            g.excess + g.approach.as_ref().map_or(0.0, |a| a.excess)
-        });
+        let via: Vec<GoalEval> = self
+            .via_positions
+            .iter()
+            .map(|v| self.tcp_eval(&w, v.ends, &v.position, v.tolerance_m).0)
+            .collect();
+        let goal_excess = via.iter().map(|v| v.excess).sum::<f64>()
+            + goal.as_ref().map_or(0.0, |g| {
+                g.excess + g.approach.as_ref().map_or(0.0, |a| a.excess)
+            });
         let linear_ok = self.linear_ok(rows, &w);
         GridEval {
             cost: (&z - centre).norm_squared(),
@@ -153,9 +153,32 @@ impl Problem {
             buffered_violation: buffered,
             true_violation: truth + goal_excess,
             goal,
+            via,
             linear_ok,
             interrupted: interrupted.into_inner(),
         }
+    }
+
+    /// The TCP at `ends` phase `p` against `target` within `tolerance` (no
+    /// approach), and the TCP's orientation there.
+    fn tcp_eval(
+        &self,
+        w: &DVector<f64>,
+        p: usize,
+        target: &Vector3<f64>,
+        tolerance: f64,
+    ) -> (GoalEval, UnitQuaternion<f64>) {
+        let q = self.ends.position(p, w);
+        let pose = self.robot.tcp_pose(&q);
+        let residual = pose.translation.vector - target;
+        let eval = GoalEval {
+            excess: (residual.norm() - tolerance).max(0.0),
+            buffered_excess: (residual.norm() - buffered_tolerance(tolerance)).max(0.0),
+            q,
+            residual,
+            approach: None,
+        };
+        (eval, pose.rotation)
     }
 
     /// The approach constraint at final configuration `q` (where the TCP's
@@ -220,6 +243,21 @@ impl Problem {
                         "goal: the TCP ends {:.4} m from the goal (tolerance_m {:.4})",
                         ge.residual.norm(),
                         goal.tolerance_m
+                    ),
+                ));
+            }
+        }
+        for (v, ve) in self.via_positions.iter().zip(&eval.via) {
+            if ve.excess > FEASIBILITY_TOLERANCE
+                && worst.as_ref().is_none_or(|(e, _)| ve.excess > *e)
+            {
+                worst = Some((
+                    ve.excess,
+                    format!(
+                        "via_points[{}]: the TCP passes {:.4} m from the position (tolerance_m {:.4})",
+                        v.index,
+                        ve.residual.norm(),
+                        v.tolerance_m
                     ),
                 ));
             }

@@ -7,7 +7,7 @@ use crate::optim::problem::phases::PhaseRows;
 use crate::optim::problem::Problem;
 use crate::optim::qp::dual_active_set::WarmStart;
 use crate::optim::qp::{Cone, Inequality, Qp, QpFailure, QpSettings, QpSolution};
-use crate::optim::scp::evaluate::GridEval;
+use crate::optim::scp::evaluate::{GoalEval, GridEval};
 use crate::optim::scp::working_set::{thin_in_time, Candidate};
 use crate::optim::solution::{SolveControl, SolveStats};
 use crate::optim::tolerances::buffered_tolerance;
@@ -45,6 +45,12 @@ impl Problem {
         if let Some((cone, excess)) = self.goal_cone(at.eval, at.rho) {
             work.qp.cones.push(cone);
             model_slack += excess;
+        }
+        for (v, ve) in self.via_positions.iter().zip(&at.eval.via) {
+            work.qp
+                .cones
+                .push(self.tcp_cone(at.eval, ve, v.ends, v.tolerance_m, at.rho));
+            model_slack += ve.buffered_excess;
         }
         if let Some((row, excess)) = self.approach_row(at.eval, at.rho) {
             work.qp.inequalities.push(row);
@@ -188,17 +194,31 @@ impl Problem {
     /// The goal as a second-order cone linearised at `eval`, and its excess.
     fn goal_cone(&self, eval: &GridEval, rho: f64) -> Option<(Cone, f64)> {
         let (goal, ge) = (self.goal.as_ref()?, eval.goal.as_ref()?);
-        let j = self.robot.tcp_jacobian(&ge.q);
-        let linear = DMatrix::from_iterator(3, j.ncols(), j.rows(0, 3).iter().cloned());
-        let g = linear * self.ends.position_jacobian(1);
-        let gz = &g * &eval.z;
-        let cone = Cone {
-            offset: DVector::from_fn(3, |i, _| ge.residual[i] - gz[i]),
-            matrix: g,
-            radius: buffered_tolerance(goal.tolerance_m),
-            penalty: rho,
-        };
+        let cone = self.tcp_cone(eval, ge, 1, goal.tolerance_m, rho);
         Some((cone, ge.buffered_excess))
+    }
+
+    /// `|TCP(z) − target| ≤ tolerance` at `ends` phase `p`, linearised at
+    /// `eval` (whose TCP there is `tcp`), as a second-order cone with an
+    /// L1-penalised slack.
+    fn tcp_cone(
+        &self,
+        eval: &GridEval,
+        tcp: &GoalEval,
+        p: usize,
+        tolerance: f64,
+        rho: f64,
+    ) -> Cone {
+        let j = self.robot.tcp_jacobian(&tcp.q);
+        let linear = DMatrix::from_iterator(3, j.ncols(), j.rows(0, 3).iter().cloned());
+        let g = linear * self.ends.position_jacobian(p);
+        let gz = &g * &eval.z;
+        Cone {
+            offset: DVector::from_fn(3, |i, _| tcp.residual[i] - gz[i]),
+            matrix: g,
+            radius: buffered_tolerance(tolerance),
+            penalty: rho,
+        }
     }
 
     /// The approach direction linearised at `eval`,

@@ -106,6 +106,7 @@ impl Problem {
             max_jerk_ratio: jerk_ratio,
             goal_error_m: self.goal_error(w),
             goal_angle_error_rad: self.goal_angle_error(w),
+            via_position_excess_m: self.via_position_excess(w),
             verified_samples: if interrupted.is_some() {
                 0
             } else {
@@ -241,6 +242,19 @@ impl Problem {
                 distances,
             ),
         })
+    }
+
+    /// Largest TCP distance from a position waypoint beyond its tolerance
+    /// (`None` without position waypoints).
+    pub(crate) fn via_position_excess(&self, w: &DVector<f64>) -> Option<f64> {
+        self.via_positions
+            .iter()
+            .map(|v| {
+                let q = self.ends.position(v.ends, w);
+                let p = self.robot.tcp_pose(&q).translation.vector;
+                (p - v.position).norm() - v.tolerance_m
+            })
+            .reduce(f64::max)
     }
 
     /// TCP distance to the goal at phase 1.
