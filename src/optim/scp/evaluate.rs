@@ -218,62 +218,43 @@ impl Problem {
         let mut worst: Option<(f64, String)> = None;
         for pp in &eval.pairs {
             for c in &pp.list {
-                let excess = self.clearance_m - c.distance;
-                if excess > FEASIBILITY_TOLERANCE && worst.as_ref().is_none_or(|(e, _)| excess > *e)
-                {
-                    let t = pp.phase_value * self.duration;
-                    worst = Some((
-                        excess,
-                        format!(
-                            "clearance_m: {} at t = {t:.2} s (required {:.4} m)",
-                            c.describe(&self.robot, &self.scene),
-                            self.clearance_m
-                        ),
-                    ));
-                }
+                keep_worst(&mut worst, self.clearance_m - c.distance, || {
+                    format!(
+                        "clearance_m: {} at t = {:.2} s (required {:.4} m)",
+                        c.describe(&self.robot, &self.scene),
+                        pp.phase_value * self.duration,
+                        self.clearance_m
+                    )
+                });
             }
         }
         if let (Some(goal), Some(ge)) = (&self.goal, &eval.goal) {
-            if ge.excess > FEASIBILITY_TOLERANCE
-                && worst.as_ref().is_none_or(|(e, _)| ge.excess > *e)
-            {
-                worst = Some((
-                    ge.excess,
-                    format!(
-                        "goal: the TCP ends {:.4} m from the goal (tolerance_m {:.4})",
-                        ge.residual.norm(),
-                        goal.tolerance_m
-                    ),
-                ));
-            }
+            keep_worst(&mut worst, ge.excess, || {
+                format!(
+                    "goal: the TCP ends {:.4} m from the goal (tolerance_m {:.4})",
+                    ge.residual.norm(),
+                    goal.tolerance_m
+                )
+            });
         }
         for (v, ve) in self.via_positions.iter().zip(&eval.via) {
-            if ve.excess > FEASIBILITY_TOLERANCE
-                && worst.as_ref().is_none_or(|(e, _)| ve.excess > *e)
-            {
-                worst = Some((
-                    ve.excess,
-                    format!(
-                        "via_points[{}]: the TCP passes {:.4} m from the position (tolerance_m {:.4})",
-                        v.index,
-                        ve.residual.norm(),
-                        v.tolerance_m
-                    ),
-                ));
-            }
+            keep_worst(&mut worst, ve.excess, || {
+                format!(
+                    "via_points[{}]: the TCP passes {:.4} m from the position (tolerance_m {:.4})",
+                    v.index,
+                    ve.residual.norm(),
+                    v.tolerance_m
+                )
+            });
         }
         if let Some(a) = eval.goal.as_ref().and_then(|g| g.approach.as_ref()) {
-            if a.excess > FEASIBILITY_TOLERANCE && worst.as_ref().is_none_or(|(e, _)| a.excess > *e)
-            {
-                let limit = self.approach().map_or(0.0, |(_, t)| t);
-                worst = Some((
-                    a.excess,
-                    format!(
-                        "goal.approach_axis: the gripper ends {:.4} rad off the approach axis (approach_tolerance_rad {limit:.4})",
-                        a.cosine.clamp(-1.0, 1.0).acos()
-                    ),
-                ));
-            }
+            let limit = self.approach().map_or(0.0, |(_, t)| t);
+            keep_worst(&mut worst, a.excess, || {
+                format!(
+                    "goal.approach_axis: the gripper ends {:.4} rad off the approach axis (approach_tolerance_rad {limit:.4})",
+                    a.cosine.clamp(-1.0, 1.0).acos()
+                )
+            });
         }
         match worst {
             Some((_, text)) => text,
@@ -282,5 +263,13 @@ impl Problem {
             }
             None => "no constraint violated on the optimisation phases".into(),
         }
+    }
+}
+
+/// Keep `(excess, text())` as the worst violation so far when it is a
+/// violation and larger than the worst.
+fn keep_worst(worst: &mut Option<(f64, String)>, excess: f64, text: impl FnOnce() -> String) {
+    if excess > FEASIBILITY_TOLERANCE && worst.as_ref().is_none_or(|(e, _)| excess > *e) {
+        *worst = Some((excess, text()));
     }
 }
