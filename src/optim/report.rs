@@ -222,6 +222,12 @@ pub struct TrajectoryReport {
     /// waypoints.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub via_position_excess_m: Option<f64>,
+    /// Largest joint difference (rad) from a configuration waypoint with a
+    /// `tolerance_rad`, beyond that tolerance (≤ 0 when every one is met);
+    /// `None` without such waypoints (exact ones are in
+    /// `equality_error_rad`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub via_configuration_excess_rad: Option<f64>,
     /// SCP iterations (QPs solved) that produced this trajectory.
     pub iterations: usize,
     /// Wall-clock solve time (ms); not deterministic.

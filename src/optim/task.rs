@@ -18,9 +18,10 @@ pub const MAX_DURATION_S: f64 = 600.0;
 pub const MAX_VIA_POINTS: usize = 32;
 
 /// A point the trajectory passes at a given time: a configuration
-/// (exactly: ProMP via-point conditioning, an equality of the optimisation,
-/// so with nothing else binding the answer is the prior conditioned on it
-/// and on the start, in closed form) or a TCP position (within
+/// (exactly by default: ProMP via-point conditioning, an equality of the
+/// optimisation, so with nothing else binding the answer is the prior
+/// conditioned on it and on the start, in closed form; or every joint
+/// within `tolerance_rad`, linear rows) or a TCP position (within
 /// `tolerance_m`, linearised like the goal).
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -45,6 +46,17 @@ pub struct Waypoint {
     /// [`DEFAULT_WAYPOINT_TOLERANCE_M`]); only with `position`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tolerance_m: Option<f64>,
+    /// Allowed difference (rad) of every joint from `configuration`
+    /// (default 0: exactly, by conditioning); only with `configuration`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tolerance_rad: Option<f64>,
+}
+
+impl Waypoint {
+    /// Whether the waypoint is a configuration met exactly (an equality).
+    pub fn is_exact_configuration(&self) -> bool {
+        self.configuration.is_some() && self.tolerance_rad.is_none_or(|t| t == 0.0)
+    }
 }
 
 /// Default `via_points[i].tolerance_m` of a position (m).

@@ -187,7 +187,48 @@ fn waypoint() -> Waypoint {
         configuration: None,
         position: None,
         tolerance_m: None,
+        tolerance_rad: None,
     }
+}
+
+/// A configuration waypoint with a tolerance holds every joint within it
+/// at its time, and costs no more than the same waypoint met exactly, which
+/// costs more than none.
+#[test]
+fn a_tolerant_configuration_waypoint_is_met_within_its_tolerance() {
+    let robot = Robot::panda().unwrap();
+    let (_, mut req) = convex_request(7);
+    let plain = req.validate(&robot).unwrap();
+    let free = plain.solve(&SolveControl::default()).unwrap();
+    assert_eq!(free.status, Status::Optimal);
+    let k = plain.basis().phases().len() / 2;
+    let q_free = plain.trajectory(&free.weights).points[k].positions.clone();
+    let target: Vec<f64> = q_free.iter().map(|q| q + 0.1).collect();
+    let mut solve = |tolerance_rad: Option<f64>| {
+        req.task.via_points = vec![Waypoint {
+            phase: Some(plain.basis().phases()[k]),
+            configuration: Some(target.clone()),
+            tolerance_rad,
+            ..waypoint()
+        }];
+        let p = req.validate(&robot).unwrap();
+        let sol = p.solve(&SolveControl::default()).unwrap();
+        assert_eq!(sol.status, Status::Optimal, "{:?}", sol.reason);
+        let q = p.trajectory(&sol.weights).points[k].positions.clone();
+        (sol, q)
+    };
+    let (loose, q) = solve(Some(0.04));
+    let excess = loose.report.via_configuration_excess_rad.unwrap();
+    assert!(excess <= 1e-6, "{excess}");
+    for (a, c) in q.iter().zip(&target) {
+        assert!((a - c).abs() <= 0.04 + 1e-6, "{a} vs {c}");
+    }
+    let (exact, q) = solve(None);
+    for (a, c) in q.iter().zip(&target) {
+        assert!((a - c).abs() <= 1e-8, "{a} vs {c}");
+    }
+    assert!(free.mahalanobis < loose.mahalanobis);
+    assert!(loose.mahalanobis < exact.mahalanobis);
 }
 
 /// A TCP position waypoint bends the path through it: the answer is

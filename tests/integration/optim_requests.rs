@@ -115,6 +115,7 @@ fn bad_input_names_the_field() {
             configuration: Some(configuration),
             position: None,
             tolerance_m: None,
+            tolerance_rad: None,
         };
     let at = |position: [f64; 3], tolerance_m: Option<f64>| dpmp::optim::Waypoint {
         phase: Some(0.5),
@@ -122,6 +123,7 @@ fn bad_input_names_the_field() {
         configuration: None,
         position: Some(position),
         tolerance_m,
+        tolerance_rad: None,
     };
     let mut both = at([0.5, 0.0, 0.5], None);
     both.configuration = Some(q.clone());
@@ -131,10 +133,16 @@ fn bad_input_names_the_field() {
     };
     let mut tolerant = via(Some(0.5), None, q.clone());
     tolerant.tolerance_m = Some(0.01);
+    let mut negative = via(Some(0.5), None, q.clone());
+    negative.tolerance_rad = Some(-0.1);
+    let mut angled = at([0.5, 0.0, 0.5], None);
+    angled.tolerance_rad = Some(0.1);
     for (points, field) in [
         (vec![both], "via_points[0]"),
         (vec![neither], "via_points[0]"),
         (vec![tolerant], "via_points[0].tolerance_m"),
+        (vec![negative], "via_points[0].tolerance_rad"),
+        (vec![angled], "via_points[0].tolerance_rad"),
         (
             vec![at([0.5, f64::NAN, 0.5], None)],
             "via_points[0].position[1]",

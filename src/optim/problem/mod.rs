@@ -39,6 +39,8 @@ pub struct Problem {
     pub(crate) goal: Option<Goal>,
     /// The TCP positions of the request's position waypoints.
     pub(crate) via_positions: Vec<ViaPosition>,
+    /// The request's configuration waypoints with a tolerance.
+    pub(crate) via_boxes: Vec<ViaBox>,
     pub(crate) options: SolverOptions,
     pub(crate) duration: f64,
     /// How the phase advances with time (rest-to-rest or free ends).
@@ -117,8 +119,12 @@ impl Problem {
             (Some(_), None) => false,
             (None, _) => true,
         };
-        let via_ok =
-            self.via_positions.is_empty() || report.via_position_excess_m.is_some_and(|e| e <= tol);
+        let via_ok = (self.via_positions.is_empty()
+            || report.via_position_excess_m.is_some_and(|e| e <= tol))
+            && (self.via_boxes.is_empty()
+                || report
+                    .via_configuration_excess_rad
+                    .is_some_and(|e| e <= tol));
         let ratio_ok = |r: Option<f64>| r.is_none_or(|r| r <= 1.0 + tol);
         // An interrupted verification has no clearance figures: never feasible.
         let clearance_checked = self.scene.is_empty()
@@ -151,4 +157,29 @@ pub(crate) struct ViaPosition {
     pub(crate) position: Vector3<f64>,
     /// Allowed distance (m).
     pub(crate) tolerance_m: f64,
+}
+
+/// A configuration the trajectory passes with every joint within
+/// `tolerance_rad` at one of the `ends` phases (a configuration waypoint of
+/// the request with a tolerance).
+#[derive(Clone, Debug)]
+pub(crate) struct ViaBox {
+    /// Index in the request's `via_points`.
+    pub(crate) index: usize,
+    /// Index of its phase in the problem's `ends` rows.
+    pub(crate) ends: usize,
+    /// Target joint positions (rad).
+    pub(crate) configuration: Vec<f64>,
+    /// Allowed difference per joint (rad).
+    pub(crate) tolerance_rad: f64,
+}
+
+impl ViaBox {
+    /// `Σ_j max(0, |q_j − c_j| − tolerance)` at configuration `q`.
+    pub(crate) fn excess(&self, q: &[f64], tolerance: f64) -> f64 {
+        q.iter()
+            .zip(&self.configuration)
+            .map(|(a, c)| ((a - c).abs() - tolerance).max(0.0))
+            .sum()
+    }
 }

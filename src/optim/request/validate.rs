@@ -11,7 +11,7 @@ use crate::error::{ensure_finite, ensure_in_range as check_range, ensure_positiv
 use crate::optim::problem::linear::LinearSet;
 use crate::optim::problem::phases::{PhaseRows, TimeWarp};
 use crate::optim::problem::whiten::Whitening;
-use crate::optim::problem::{Problem, ViaPosition};
+use crate::optim::problem::{Problem, ViaBox, ViaPosition};
 use crate::optim::task::{
     Boundary, Goal, SolverOptions, Waypoint, DEFAULT_ACTIVATION_MARGIN_M,
     DEFAULT_WAYPOINT_TOLERANCE_M, MAX_DURATION_S, MAX_ITERATIONS, MAX_RESTARTS, MAX_VIA_POINTS,
@@ -141,6 +141,20 @@ impl Task {
                         ends: 2 + i,
                         position: Vector3::from(v.position?),
                         tolerance_m: v.tolerance_m.unwrap_or(DEFAULT_WAYPOINT_TOLERANCE_M),
+                    })
+                })
+                .collect(),
+            via_boxes: self
+                .via_points
+                .iter()
+                .enumerate()
+                .filter(|(_, v)| !v.is_exact_configuration())
+                .filter_map(|(i, v)| {
+                    Some(ViaBox {
+                        index: i,
+                        ends: 2 + i,
+                        configuration: v.configuration.clone()?,
+                        tolerance_rad: v.tolerance_rad?,
                     })
                 })
                 .collect(),
@@ -364,6 +378,7 @@ fn joint_bounds(robot: &Robot, margin: f64, req: &Task) -> Result<LinearSet> {
             .via_points
             .iter()
             .enumerate()
+            .filter(|(_, v)| v.is_exact_configuration())
             .filter_map(|(i, v)| Some((2 + i, v.configuration.clone()?)))
             .collect(),
         rest: req.boundary == Boundary::Rest,
@@ -403,8 +418,11 @@ fn check_via_points(via: &[Waypoint], duration_s: f64, robot: &Robot) -> Result<
                 if v.tolerance_m.is_some() {
                     return Err(Error::invalid(
                         field("tolerance_m"),
-                        "a configuration is met exactly: `tolerance_m` goes only with `position`",
+                        "`tolerance_m` goes with `position`; a configuration takes `tolerance_rad`",
                     ));
+                }
+                if let Some(t) = v.tolerance_rad {
+                    check_range(&field("tolerance_rad"), t, 0.0, std::f64::consts::PI)?;
                 }
             }
             (None, Some(p)) => {
@@ -420,6 +438,12 @@ fn check_via_points(via: &[Waypoint], duration_s: f64, robot: &Robot) -> Result<
                 }
                 let tolerance = v.tolerance_m.unwrap_or(DEFAULT_WAYPOINT_TOLERANCE_M);
                 check_range(&field("tolerance_m"), tolerance, 1e-6, 1.0)?;
+                if v.tolerance_rad.is_some() {
+                    return Err(Error::invalid(
+                        field("tolerance_rad"),
+                        "`tolerance_rad` goes with `configuration`; a position takes `tolerance_m`",
+                    ));
+                }
             }
             _ => {
                 return Err(Error::invalid(

@@ -27,6 +27,11 @@ pub(in crate::optim) struct GridEval {
     pub(in crate::optim) goal: Option<GoalEval>,
     /// The position waypoints, in the problem's order.
     pub(in crate::optim) via: Vec<GoalEval>,
+    /// The configurations at the tolerant configuration waypoints, in the
+    /// problem's order.
+    pub(in crate::optim) via_boxes: Vec<Vec<f64>>,
+    /// Their excess beyond the buffered tolerances (the merit's).
+    pub(in crate::optim) via_box_excess: f64,
     pub(in crate::optim) linear_ok: bool,
     /// The caller's deadline or cancel flag stopped the clearance pass:
     /// the pairs are incomplete, so the iterate is never accepted.
@@ -73,7 +78,8 @@ impl GridEval {
     }
 
     pub(in crate::optim) fn goal_excess(&self) -> f64 {
-        let via: f64 = self.via.iter().map(|v| v.buffered_excess).sum();
+        let via: f64 =
+            self.via.iter().map(|v| v.buffered_excess).sum::<f64>() + self.via_box_excess;
         via + self.goal.as_ref().map_or(0.0, |g| {
             g.buffered_excess + g.approach.as_ref().map_or(0.0, |a| a.buffered_excess)
         })
@@ -140,7 +146,23 @@ impl Problem {
             .iter()
             .map(|v| self.tcp_eval(&w, v.ends, &v.position, v.tolerance_m).0)
             .collect();
-        let goal_excess = via.iter().map(|v| v.excess).sum::<f64>()
+        let via_boxes: Vec<Vec<f64>> = self
+            .via_boxes
+            .iter()
+            .map(|v| self.ends.position(v.ends, &w))
+            .collect();
+        let (box_excess, via_box_excess) =
+            self.via_boxes
+                .iter()
+                .zip(&via_boxes)
+                .fold((0.0, 0.0), |(e, b), (v, q)| {
+                    (
+                        e + v.excess(q, v.tolerance_rad),
+                        b + v.excess(q, buffered_angle(v.tolerance_rad)),
+                    )
+                });
+        let goal_excess = box_excess
+            + via.iter().map(|v| v.excess).sum::<f64>()
             + goal.as_ref().map_or(0.0, |g| {
                 g.excess + g.approach.as_ref().map_or(0.0, |a| a.excess)
             });
@@ -154,6 +176,8 @@ impl Problem {
             true_violation: truth + goal_excess,
             goal,
             via,
+            via_boxes,
+            via_box_excess,
             linear_ok,
             interrupted: interrupted.into_inner(),
         }
@@ -244,6 +268,14 @@ impl Problem {
                     v.index,
                     ve.residual.norm(),
                     v.tolerance_m
+                )
+            });
+        }
+        for (v, q) in self.via_boxes.iter().zip(&eval.via_boxes) {
+            keep_worst(&mut worst, v.excess(q, v.tolerance_rad), || {
+                format!(
+                    "via_points[{}]: the joints pass beyond tolerance_rad {:.4} of the configuration",
+                    v.index, v.tolerance_rad
                 )
             });
         }

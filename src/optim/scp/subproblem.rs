@@ -3,14 +3,15 @@
 //! of rows and solved by constraint generation.
 
 use crate::optim::problem::linear::{RowKind, RowRef};
+use crate::optim::problem::phases::Derivative;
 use crate::optim::problem::phases::PhaseRows;
-use crate::optim::problem::Problem;
+use crate::optim::problem::{Problem, ViaBox};
 use crate::optim::qp::dual_active_set::WarmStart;
 use crate::optim::qp::{Cone, Inequality, Qp, QpFailure, QpSettings, QpSolution};
 use crate::optim::scp::evaluate::{GoalEval, GridEval};
 use crate::optim::scp::working_set::{thin_in_time, Candidate};
 use crate::optim::solution::{SolveControl, SolveStats};
-use crate::optim::tolerances::buffered_tolerance;
+use crate::optim::tolerances::{buffered_angle, buffered_tolerance};
 use crate::optim::tolerances::{
     ACTIVE_DUAL_FRACTION, CERTIFY_TIGHTENING, CLEARANCE_BAND_M, CLEARANCE_BUFFER_M,
     GENERATION_TOLERANCE,
@@ -46,6 +47,13 @@ impl Problem {
             work.qp.cones.push(cone);
             model_slack += excess;
         }
+        for (v, q) in self.via_boxes.iter().zip(&at.eval.via_boxes) {
+            for row in self.box_rows(at.eval, v, q, at.rho) {
+                work.qp.inequalities.push(row);
+                work.ids.push(RowId::Other);
+            }
+        }
+        model_slack += at.eval.via_box_excess;
         for (v, ve) in self.via_positions.iter().zip(&at.eval.via) {
             work.qp
                 .cones
@@ -219,6 +227,29 @@ impl Problem {
             radius: buffered_tolerance(tolerance),
             penalty: rho,
         }
+    }
+
+    /// `|q_j(z) − c_j| ≤ buffered tolerance` at a configuration waypoint,
+    /// two rows per joint (exact: a configuration is linear in `z`), each
+    /// with an L1-penalised slack; `q` is the configuration at `eval`.
+    fn box_rows(&self, eval: &GridEval, v: &ViaBox, q: &[f64], rho: f64) -> Vec<Inequality> {
+        let tolerance = buffered_angle(v.tolerance_rad);
+        let mut rows = Vec::with_capacity(2 * q.len());
+        for (j, (&qj, &cj)) in q.iter().zip(&v.configuration).enumerate() {
+            let a = self.ends.row(Derivative::Position, v.ends, j);
+            let offset = qj - a.dot(&eval.z);
+            rows.push(Inequality {
+                a: a.clone(),
+                b: cj + tolerance - offset,
+                penalty: Some(rho),
+            });
+            rows.push(Inequality {
+                a: -a,
+                b: offset - (cj - tolerance),
+                penalty: Some(rho),
+            });
+        }
+        rows
     }
 
     /// The approach direction linearised at `eval`,

@@ -107,6 +107,7 @@ impl Problem {
             goal_error_m: self.goal_error(w),
             goal_angle_error_rad: self.goal_angle_error(w),
             via_position_excess_m: self.via_position_excess(w),
+            via_configuration_excess_rad: self.via_configuration_excess(w),
             verified_samples: if interrupted.is_some() {
                 0
             } else {
@@ -253,6 +254,21 @@ impl Problem {
                 let q = self.ends.position(v.ends, w);
                 let p = self.robot.tcp_pose(&q).translation.vector;
                 (p - v.position).norm() - v.tolerance_m
+            })
+            .reduce(f64::max)
+    }
+
+    /// Largest joint difference from a configuration waypoint beyond its
+    /// tolerance (`None` without configuration waypoints with a tolerance).
+    pub(crate) fn via_configuration_excess(&self, w: &DVector<f64>) -> Option<f64> {
+        self.via_boxes
+            .iter()
+            .flat_map(|v| {
+                let q = self.ends.position(v.ends, w);
+                q.iter()
+                    .zip(&v.configuration)
+                    .map(|(a, c)| (a - c).abs() - v.tolerance_rad)
+                    .collect::<Vec<f64>>()
             })
             .reduce(f64::max)
     }
