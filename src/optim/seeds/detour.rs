@@ -19,7 +19,7 @@ use crate::optim::problem::Problem;
 use crate::optim::solution::SolveControl;
 use crate::optim::tolerances::CLEARANCE_BUFFER_M;
 use crate::scene::Clearance;
-use nalgebra::{DMatrix, DVector, Point3, Vector3};
+use nalgebra::{DMatrix, DVector, Matrix3, Matrix3xX, Point3, Vector3};
 
 /// How much farther than the clearance (m) a detour moves the witness point.
 const DETOUR_MARGIN_M: f64 = 0.01;
@@ -56,29 +56,26 @@ impl Problem {
             }
         }
         blocking.sort_by(|a, b| {
-            (a.2.distance, a.2.obstacle)
-                .partial_cmp(&(b.2.distance, b.2.obstacle))
-                .unwrap_or(std::cmp::Ordering::Equal)
+            a.2.distance
+                .total_cmp(&b.2.distance)
+                .then(a.2.obstacle.cmp(&b.2.obstacle))
         });
         let mut starts = Vec::new();
         for (k, p, c) in blocking {
             let phase = &eval.pairs[k];
             let normal = Vector3::from(c.normal);
             let width = self.obstacle_width(c.obstacle, &normal);
+            let jacobian = self.robot.point_jacobian(
+                &phase.q,
+                &phase.frames,
+                c.link,
+                &Point3::from(c.point_robot),
+            );
             for push in [target - c.distance, -(c.distance.max(0.0) + width + target)] {
                 if starts.len() == n {
                     return starts;
                 }
-                let jacobian = self.robot.point_jacobian(
-                    &phase.q,
-                    &phase.frames,
-                    c.link,
-                    &Point3::from(c.point_robot),
-                );
-                let dq = damped_step(
-                    &DMatrix::from_iterator(3, jacobian.ncols(), jacobian.iter().copied()),
-                    &(normal * push),
-                );
+                let dq = damped_step(&jacobian, &(normal * push));
                 if let Some(z) = self.conditioned_start(p, &dq) {
                     starts.push(z);
                 }
@@ -126,14 +123,10 @@ impl Problem {
 
 /// `Jᵀ (J Jᵀ + μI)⁻¹ dx`: the damped least-squares joint step that moves a
 /// point with Jacobian `J` (3 × n) by `dx`.
-fn damped_step(jacobian: &DMatrix<f64>, dx: &Vector3<f64>) -> DVector<f64> {
-    let mut gram = jacobian * jacobian.transpose();
-    for i in 0..3 {
-        gram[(i, i)] += DAMPING;
-    }
-    let dx = DVector::from_column_slice(dx.as_slice());
+fn damped_step(jacobian: &Matrix3xX<f64>, dx: &Vector3<f64>) -> DVector<f64> {
+    let gram = jacobian * jacobian.transpose() + Matrix3::identity() * DAMPING;
     match gram.cholesky() {
-        Some(ch) => jacobian.transpose() * ch.solve(&dx),
+        Some(ch) => jacobian.transpose() * ch.solve(dx),
         None => DVector::zeros(jacobian.ncols()),
     }
 }
