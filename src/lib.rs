@@ -36,6 +36,9 @@
 //! - [`perception`] — the gripper camera model, aligned depth images, and
 //!   the 3-D target position behind a box.
 //! - [`net`] — the dPMP network in candle and its inference API.
+//! - [`task_space`] — the TCP trajectory as ProMP weights (the paper's
+//!   second space), and a task-space model's distribution as the joint-space
+//!   prior the optimiser takes (IK-tracked draws).
 //! - [`plan`] — one validated [`plan::PlanRequest`] and the image (+ depth)
 //!   → prior → goal → optimiser pipeline behind `/v1/plan` and `dpmp plan`.
 //! - [`optim`] — the Mahalanobis-closest trajectory optimiser: a typed prior
@@ -84,6 +87,7 @@ pub mod scene;
 pub mod service;
 pub mod strict_json;
 pub mod synth;
+pub mod task_space;
 pub mod train;
 
 pub use error::{Error, Result};

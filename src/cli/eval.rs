@@ -1,10 +1,12 @@
 //! `dpmp eval`: the paper's tables for a trained model on a dataset split,
 //! and the depth-aware planning figures when the dataset has depth.
 
-use crate::net::Model;
+use crate::net::{Model, Space};
 use crate::train::baseline::evaluate_baseline;
 use crate::train::data::load_split;
+use crate::train::data::Targets;
 use crate::train::eval::{evaluate, to_markdown, write_outputs};
+use crate::train::final_point::TcpFk;
 use crate::train::plan_eval::evaluate_plans;
 use crate::Error;
 use std::path::PathBuf;
@@ -56,20 +58,26 @@ pub fn run(args: EvalArgs) -> crate::Result<()> {
         }
         None => model.config().training.as_ref().map_or(1.0, |t| t.alpha),
     };
-    let data = load_split(&args.data, &args.split, &model.config().preprocess)?;
     let robot = std::sync::Arc::new(args.robot.load()?);
     model.config().check_robot(&robot)?;
-    let fk = |q: &[f64]| robot.tcp_pose(q);
-    let (mut report, embedding) = evaluate(&model, &data.samples, &args.split, alpha, &fk)?;
+    let space = model.config().space;
+    let targets = Targets::of(space, &robot);
+    let data = load_split(&args.data, &args.split, &model.config().preprocess, targets)?;
+    let joint_fk = |q: &[f64]| robot.tcp_pose(q);
+    let fk: TcpFk = match space {
+        Space::Joint => &joint_fk,
+        Space::Task => &task_pose,
+    };
+    let (mut report, embedding) = evaluate(&model, &data.samples, &args.split, alpha, fk)?;
     report.planning = evaluate_plans(&model, &robot, &args.data, &args.split)?;
     if matches!(args.split.as_str(), "val" | "test") {
-        let train = load_split(&args.data, "train", &model.config().preprocess)?;
+        let train = load_split(&args.data, "train", &model.config().preprocess, targets)?;
         let basis = crate::promp::Basis::new(&data.promp)?;
         report.baseline = Some(evaluate_baseline(
             &train.samples,
             &data.samples,
             &basis,
-            &fk,
+            fk,
         )?);
     }
     let out = args.out.clone().unwrap_or_else(|| {
@@ -82,4 +90,12 @@ pub fn run(args: EvalArgs) -> crate::Result<()> {
     } else {
         crate::cli::write_stdout(&to_markdown(&report))
     }
+}
+
+/// The pose of a task-space row (the quaternion normalised). A prediction
+/// whose quaternion has no direction (norm below 1e-6) scores as the
+/// identity rotation: its orientation error is then as large as it is.
+fn task_pose(row: &[f64]) -> nalgebra::Isometry3<f64> {
+    crate::task_space::pose_of_row(row)
+        .unwrap_or_else(|_| nalgebra::Isometry3::translation(row[0], row[1], row[2]))
 }

@@ -13,6 +13,11 @@ pub struct TrainArgs {
     /// Architecture: ae, vae, cvae or direct.
     #[arg(long)]
     pub arch: String,
+    /// The space of the predicted trajectories: joint (angles) or task (the
+    /// TCP's position and quaternion; the paper's second space). A
+    /// task-space model plans through IK-tracked draws.
+    #[arg(long, default_value = "joint")]
+    pub space: String,
     /// Run tp3 (domain-specific latent tuning) after tp2.
     #[arg(long)]
     pub latent_tuning: bool,
@@ -85,6 +90,7 @@ impl TrainArgs {
         let mut s = TrainSettings::new(&self.data, &self.out, Arch::parse(&self.arch)?);
         s.latent_tuning = self.latent_tuning;
         s.depth_condition = self.depth_condition;
+        s.space = crate::net::Space::parse(&self.space)?;
         s.seed = self.seed;
         s.epochs_tp1 = self.epochs_tp1.unwrap_or(s.epochs_tp1);
         s.epochs_tp2 = self.epochs_tp2.unwrap_or(s.epochs_tp2);

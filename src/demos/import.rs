@@ -10,12 +10,15 @@
 //!               "box": [x1, y1, x2, y2], "mask_applied": false,
 //!               "depth": "depth/p3b1.png",
 //!               "demos": ["demos/p3b1/0.csv", "demos/p3b1/1.csv"],
+//!               "task_demos": ["demos/p3b1/0-tcp.csv", "demos/p3b1/1-tcp.csv"],
 //!               "obstacles": [...]}]}
 //! ```
 //!
 //! A target takes its prior from recorded demonstrations (`demos`, fitted
 //! as in [`super::fit`]) or from the paper's annotation folder (`"prior":
-//! {"annotation": "dir", "index": K}`). `camera` (default: the generator's
+//! {"annotation": "dir", "index": K}`). Its task-space weights are derived
+//! from the demonstrations by FK, or fitted from `task_demos`, TCP
+//! recordings of the same demonstrations ([`super::task`]). `camera` (default: the generator's
 //! D435i on the Panda's gripper), `depth`, `obstacles` and `mask_applied`
 //! are optional. `group` is the plant: the splits never put one group in
 //! two sets.
@@ -27,6 +30,7 @@
 //! temporary folder beside `--out` and renames it, so `--out` holds a whole
 //! dataset or nothing.
 
+use super::task::set_task_space;
 use super::{fit_prior, read_demonstration_with, ReadOptions};
 use crate::perception::{locate_target, Camera, CameraModel, DepthImage};
 use crate::promp::{annotation, Basis, PrompConfig, WeightDistribution};
@@ -89,6 +93,11 @@ pub struct ImportTarget {
     /// Or a prior from the paper's annotation folder.
     #[serde(default)]
     pub prior: Option<AnnotationSource>,
+    /// TCP recordings of the same demonstrations (`time, x, y, z, qx, qy,
+    /// qz, qw`; [`super::task`]), in the order of `demos`: the task-space
+    /// weights are fitted from them instead of derived by FK.
+    #[serde(default)]
+    pub task_demos: Option<Vec<String>>,
     /// Motion duration (s) for a target with an annotation prior
     /// (default 4 s; with demos, their median duration).
     #[serde(default)]
@@ -448,7 +457,7 @@ impl Context<'_> {
             berry,
         };
         let dist = &prior.distribution;
-        let record = TargetRecord {
+        let mut record = TargetRecord {
             id,
             config,
             berry,
@@ -471,8 +480,15 @@ impl Context<'_> {
             promp: self.basis.config().clone(),
             demos: prior.demos,
             distribution: DistributionJson::from(dist),
+            task_distribution: None,
             annotation: annotation::joints_from_distribution(dist)?,
         };
+        record.fill_task_space(self.robot)?;
+        if let Some(files) = &t.task_demos {
+            let paths: Vec<PathBuf> = files.iter().map(|f| self.path(f)).collect();
+            set_task_space(self.basis, self.robot, &paths, self.read, &mut record)
+                .map_err(|e| e.within("task_demos"))?;
+        }
         record.validate()?;
         Ok(Prepared {
             entry,
@@ -560,6 +576,7 @@ impl Context<'_> {
                 .map(|(w, final_q)| Demo {
                     weights: w.as_slice().to_vec(),
                     final_q,
+                    task_weights: None,
                 })
                 .collect(),
             start,

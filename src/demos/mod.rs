@@ -19,6 +19,7 @@
 pub mod file;
 pub mod fit;
 pub mod import;
+pub mod task;
 pub mod write;
 
 pub use file::{

@@ -67,6 +67,46 @@ impl Arch {
     }
 }
 
+/// What the network's weights describe: joint angles, or the TCP pose
+/// (position and quaternion, [`crate::task_space`]). A task-space model's
+/// seven "joints" are the seven task dimensions.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Space {
+    /// Joint-space trajectories (rad): the optimiser's prior directly.
+    #[default]
+    Joint,
+    /// Task-space trajectories: x, y, z (m), qx, qy, qz, qw.
+    Task,
+}
+
+impl Space {
+    /// Parse `joint | task`.
+    pub fn parse(text: &str) -> Result<Space> {
+        match text {
+            "joint" => Ok(Space::Joint),
+            "task" => Ok(Space::Task),
+            other => Err(Error::invalid(
+                "space",
+                format!("expected joint or task, got {other:?}"),
+            )),
+        }
+    }
+
+    /// The lowercase name.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Space::Joint => "joint",
+            Space::Task => "task",
+        }
+    }
+
+    /// Whether this is joint space (the default, not written to configs).
+    pub fn is_joint(&self) -> bool {
+        *self == Space::Joint
+    }
+}
+
 /// Per-output affine map from the heads' raw outputs to weight means and
 /// covariance codes: `value = raw * scale + offset`, one entry per joint and
 /// output (`n_joints x (n_basis + n_basis (n_basis + 1) / 2)`, joint-major).
@@ -170,6 +210,9 @@ pub struct ModelConfig {
     pub arch: Arch,
     /// Whether the encoder was latent-tuned (tp3, the paper's "l-" prefix).
     pub latent_tuning: bool,
+    /// The space of the predicted weights (configs without it: joint).
+    #[serde(default, skip_serializing_if = "Space::is_joint")]
+    pub space: Space,
     /// Latent vector size (the paper: 256).
     pub latent_dim: usize,
     /// Output channels of each encoder conv block (each halves the size).
@@ -221,6 +264,7 @@ impl ModelConfig {
             name: name.to_string(),
             arch,
             latent_tuning: false,
+            space: Space::Joint,
             latent_dim: 256,
             encoder_channels: vec![8, 16, 32, 32],
             head_hidden: vec![256, 128, 64, 32],
@@ -298,6 +342,16 @@ impl ModelConfig {
             return Err(Error::invalid(
                 "depth_condition",
                 "only a conditional architecture (cvae) reads a condition",
+            ));
+        }
+        if self.space == Space::Task && self.n_joints != crate::task_space::TASK_DIMS {
+            return Err(Error::invalid(
+                "n_joints",
+                format!(
+                    "a task-space model predicts {} dimensions, got {}",
+                    crate::task_space::TASK_DIMS,
+                    self.n_joints
+                ),
             ));
         }
         if self.format != MODEL_FORMAT {

@@ -41,12 +41,13 @@ pub use request::{
 };
 pub use world::{WorldReport, WorldSource};
 
-use crate::net::Model;
+use crate::net::{Model, Space};
 use crate::optim::{optimize_prior, OptimizeResponse, SolveControl};
 use crate::promp::distribution::matrix_rows;
 use crate::promp::{Basis, WeightDistribution};
 use crate::robot::Robot;
 use crate::scene::ObstacleShape;
+use crate::task_space::{joint_prior, JointPriorOptions, JointPriorReport};
 use crate::{Error, Result};
 use goal::{goal_from_target, locate};
 use serde::Serialize;
@@ -78,6 +79,10 @@ pub struct PlanResponse {
     /// The world sensed from depth, with `world: "depth"`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub world: Option<WorldReport>,
+    /// A task-space model's prior: how closely the joint-space prior the
+    /// optimiser started from tracks the predicted TCP distribution.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub task_space: Option<JointPriorReport>,
     /// With `world: "depth"`, the points of the sensed cloud the plan kept
     /// clear of (m, base frame; empty when the camera saw nothing): the
     /// [`world::SENSED_OBSTACLE_ID`] obstacle's. Not part of the JSON
@@ -149,10 +154,18 @@ pub fn predict_and_optimize(
         })?;
     let basis = task.basis()?;
     check_dimensions(&prediction.distribution, robot, &basis)?;
-    check_model_prior(model, &prediction.distribution, robot, &basis)?;
+    let (predicted, task_space) = joint_space(
+        model,
+        robot,
+        &basis,
+        prediction.distribution,
+        task.start.as_deref(),
+        ctl,
+    )?;
+    check_model_prior(model, &predicted, robot, &basis)?;
     let distribution = match &target {
-        Some(report) => prior_towards_goal(&prediction.distribution, robot, &basis, report)?,
-        None => prediction.distribution,
+        Some(report) => prior_towards_goal(&predicted, robot, &basis, report)?,
+        None => predicted,
     };
     let prior = prior_trajectory(&distribution, &basis);
     // The optimiser checks the (conditioned) prior as it checks a
@@ -179,8 +192,36 @@ pub fn predict_and_optimize(
         model: model.name().to_string(),
         target,
         world,
+        task_space,
         sensed_cloud,
     })
+}
+
+/// A task-space model's prediction as the joint-space prior the optimiser
+/// takes ([`crate::task_space::joint_prior`], tracked from the task's start
+/// or the robot's home), with its tracking report; a joint-space model's
+/// as it is.
+fn joint_space(
+    model: &Model,
+    robot: &Robot,
+    basis: &Basis,
+    predicted: WeightDistribution,
+    start: Option<&[f64]>,
+    ctl: &SolveControl,
+) -> Result<(WeightDistribution, Option<JointPriorReport>)> {
+    if model.config().space == Space::Joint {
+        return Ok((predicted, None));
+    }
+    let start = start.map_or_else(|| robot.home(), <[f64]>::to_vec);
+    let options = JointPriorOptions::default();
+    let (prior, report) = joint_prior(robot, basis, &predicted, &start, &options, &|| {
+        ctl.should_stop()
+    })
+    .map_err(|e| match e {
+        Error::Invalid { .. } | Error::Numerical(_) => model_fault(model, &e),
+        other => other,
+    })?;
+    Ok((prior, Some(report)))
 }
 
 /// The network's (conditioned) prediction must be a prior the optimiser

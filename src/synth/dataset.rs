@@ -1,6 +1,7 @@
-//! The dataset on disk, generated (`dpmp-dataset/2`; version 1, without
-//! depth, still loads) or imported from a lab's recordings
-//! (`dpmp-dataset/3`: no generator settings, targets grouped by plant,
+//! The dataset on disk, generated (`dpmp-dataset/4`; version 1, without
+//! depth, and version 2, without task-space weights, still load) or imported from a lab's recordings
+//! (`dpmp-dataset/5`; version 3, without task-space weights, still loads:
+//! no generator settings, targets grouped by plant,
 //! ids chosen by the lab; see [`crate::demos::import`]):
 //!
 //! ```text
@@ -25,16 +26,27 @@ use crate::{Error, Result};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
-/// The format tag of the manifests this version writes: version 2 adds
-/// aligned depth images (`depth/<id>.png`) and each target's measured depth.
-pub const FORMAT: &str = "dpmp-dataset/2";
+/// The format tag of the manifests this version generates: version 2 added
+/// aligned depth images (`depth/<id>.png`) and each target's measured depth;
+/// version 4 adds the task-space weights of every demonstration and their
+/// distribution ([`TargetRecord::task_distribution`]).
+pub const FORMAT: &str = "dpmp-dataset/4";
 
 /// The format tag of imported datasets: generator fields are absent,
-/// targets carry a `group` and whether their image is already masked.
-pub const IMPORT_FORMAT: &str = "dpmp-dataset/3";
+/// targets carry a `group` and whether their image is already masked
+/// (`dpmp-dataset/3`); version 5 adds the task-space fields as format 4.
+pub const IMPORT_FORMAT: &str = "dpmp-dataset/5";
 
-/// Format tags this version reads (version 1: colour only).
-pub const READABLE_FORMATS: [&str; 3] = ["dpmp-dataset/1", FORMAT, IMPORT_FORMAT];
+/// Format tags this version reads (version 1: colour only; versions 1-3
+/// have no task-space fields, derived at load from the joint-space
+/// demonstrations by [`TargetRecord::task_space_distribution`]).
+pub const READABLE_FORMATS: [&str; 5] = [
+    "dpmp-dataset/1",
+    "dpmp-dataset/2",
+    "dpmp-dataset/3",
+    FORMAT,
+    IMPORT_FORMAT,
+];
 
 /// Depth scale (m per unit) of imported depth images without one.
 pub const DEFAULT_DEPTH_SCALE_M: f64 = 0.001;
@@ -241,6 +253,10 @@ pub struct Demo {
     pub weights: Vec<f64>,
     /// Final configuration (rad).
     pub final_q: Vec<f64>,
+    /// Dimension-major task-space weights (`7 * n_basis`: x, y, z, qx, qy,
+    /// qz, qw; see [`crate::task_space`]); absent before format 4.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub task_weights: Option<Vec<f64>>,
 }
 
 pub use crate::promp::distribution::DistributionJson;
@@ -291,6 +307,10 @@ pub struct TargetRecord {
     pub demos: Vec<Demo>,
     /// Full (joint-coupled) weight distribution.
     pub distribution: DistributionJson,
+    /// The demonstrations' task-space weight distribution (format 4; older
+    /// records derive it, see [`TargetRecord::task_space_distribution`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub task_distribution: Option<DistributionJson>,
     /// The paper's per-joint annotation (Raw diagonal).
     pub annotation: Vec<JointAnnotation>,
 }
@@ -304,6 +324,7 @@ impl TargetRecord {
         }
         self.promp.validate().map_err(|e| e.within("promp"))?;
         let n_w = n_joints * self.promp.n_basis;
+        let n_task = crate::task_space::TASK_DIMS * self.promp.n_basis;
         ensure_finite("box", &self.bbox)?;
         if self.bbox[0] > self.bbox[2] || self.bbox[1] > self.bbox[3] {
             return Err(Error::invalid(
@@ -334,18 +355,15 @@ impl TargetRecord {
             ensure_finite(&format!("demos[{i}].weights"), &d.weights)?;
             ensure_len(&format!("demos[{i}].final_q"), &d.final_q, n_joints)?;
             ensure_finite(&format!("demos[{i}].final_q"), &d.final_q)?;
+            if let Some(t) = &d.task_weights {
+                let field = format!("demos[{i}].task_weights");
+                ensure_len(&field, t, n_task)?;
+                ensure_finite(&field, t)?;
+            }
         }
-        ensure_len("distribution.mean", &self.distribution.mean, n_w)?;
-        ensure_finite("distribution.mean", &self.distribution.mean)?;
-        if self.distribution.cov.len() != n_w {
-            return Err(Error::invalid(
-                "distribution.cov",
-                format!("expected {n_w} rows, got {}", self.distribution.cov.len()),
-            ));
-        }
-        for (i, row) in self.distribution.cov.iter().enumerate() {
-            ensure_len(&format!("distribution.cov[{i}]"), row, n_w)?;
-            ensure_finite(&format!("distribution.cov[{i}]"), row)?;
+        check_distribution("distribution", &self.distribution, n_w)?;
+        if let Some(task) = &self.task_distribution {
+            check_distribution("task_distribution", task, n_task)?;
         }
         if self.annotation.len() != n_joints {
             return Err(Error::invalid(
@@ -369,11 +387,118 @@ impl TargetRecord {
 
     /// The weight distribution as a [`crate::promp::WeightDistribution`].
     pub fn weight_distribution(&self) -> Result<crate::promp::WeightDistribution> {
-        let n = self.distribution.mean.len();
-        let mean = nalgebra::DVector::from_column_slice(&self.distribution.mean);
-        let cov = nalgebra::DMatrix::from_fn(n, n, |i, j| self.distribution.cov[i][j]);
-        crate::promp::WeightDistribution::new(mean, cov, self.start.len(), self.promp.n_basis)
+        to_distribution(&self.distribution, self.start.len(), self.promp.n_basis)
     }
+
+    /// The task-space weight distribution: the record's (format 4), or
+    /// derived from the joint-space demonstrations through `robot`'s
+    /// forward kinematics (older formats; the same computation the
+    /// generator records).
+    pub fn task_space_distribution(
+        &self,
+        robot: &crate::robot::Robot,
+    ) -> Result<crate::promp::WeightDistribution> {
+        let dims = crate::task_space::TASK_DIMS;
+        match &self.task_distribution {
+            Some(task) => to_distribution(task, dims, self.promp.n_basis),
+            None => Ok(self.derive_task_space(robot)?.0),
+        }
+    }
+
+    /// Record the task-space weights of every demonstration and their
+    /// distribution (what format 4 stores).
+    pub fn fill_task_space(&mut self, robot: &crate::robot::Robot) -> Result<()> {
+        let (distribution, weights) = self.derive_task_space(robot)?;
+        for (demo, w) in self.demos.iter_mut().zip(weights) {
+            demo.task_weights = Some(w);
+        }
+        self.task_distribution = Some(DistributionJson::from(&distribution));
+        Ok(())
+    }
+
+    /// The task-space distribution of the demonstrations and each one's
+    /// task-space weights; a record with fewer than two demonstrations (an
+    /// imported annotation) uses 64 seeded draws of its joint-space
+    /// distribution instead, and returns no per-demonstration weights.
+    fn derive_task_space(
+        &self,
+        robot: &crate::robot::Robot,
+    ) -> Result<(crate::promp::WeightDistribution, Vec<Vec<f64>>)> {
+        use rand::SeedableRng;
+        robot.validate_configuration("start", &self.start)?;
+        let basis = crate::promp::Basis::new(&self.promp)?;
+        let reference = self.task_reference(robot);
+        let draws: Vec<Vec<f64>> = if self.demos.len() >= 2 {
+            self.demos.iter().map(|d| d.weights.clone()).collect()
+        } else {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
+            let joint = self.weight_distribution()?;
+            joint
+                .sample(&mut rng, 64)
+                .iter()
+                .map(|w| w.as_slice().to_vec())
+                .collect()
+        };
+        let weights = draws
+            .iter()
+            .enumerate()
+            .map(|(k, w)| {
+                crate::task_space::task_weights(&basis, robot, w, &reference)
+                    .map(|t| t.as_slice().to_vec())
+                    .map_err(|e| e.within(&format!("demos[{k}]")))
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let vectors: Vec<nalgebra::DVector<f64>> = weights
+            .iter()
+            .map(|w| nalgebra::DVector::from_column_slice(w))
+            .collect();
+        let distribution = crate::promp::WeightDistribution::from_demonstrations(
+            &vectors,
+            crate::task_space::TASK_DIMS,
+            basis.n_basis(),
+        )?;
+        let per_demo = if self.demos.len() >= 2 {
+            weights
+        } else {
+            Vec::new()
+        };
+        Ok((distribution, per_demo))
+    }
+
+    /// The orientation the task-space quaternions' signs start from: the
+    /// TCP's at the mean start.
+    pub fn task_reference(&self, robot: &crate::robot::Robot) -> nalgebra::UnitQuaternion<f64> {
+        robot.tcp_pose(&self.start).rotation
+    }
+}
+
+/// A stored distribution as a [`crate::promp::WeightDistribution`].
+fn to_distribution(
+    d: &DistributionJson,
+    n_dims: usize,
+    n_basis: usize,
+) -> Result<crate::promp::WeightDistribution> {
+    let n = d.mean.len();
+    let mean = nalgebra::DVector::from_column_slice(&d.mean);
+    let cov = nalgebra::DMatrix::from_fn(n, n, |i, j| d.cov[i][j]);
+    crate::promp::WeightDistribution::new(mean, cov, n_dims, n_basis)
+}
+
+/// Shape and finiteness of a stored distribution of `n` weights.
+fn check_distribution(field: &str, d: &DistributionJson, n: usize) -> Result<()> {
+    ensure_len(&format!("{field}.mean"), &d.mean, n)?;
+    ensure_finite(&format!("{field}.mean"), &d.mean)?;
+    if d.cov.len() != n {
+        return Err(Error::invalid(
+            format!("{field}.cov"),
+            format!("expected {n} rows, got {}", d.cov.len()),
+        ));
+    }
+    for (i, row) in d.cov.iter().enumerate() {
+        ensure_len(&format!("{field}.cov[{i}]"), row, n)?;
+        ensure_finite(&format!("{field}.cov[{i}]"), row)?;
+    }
+    Ok(())
 }
 
 /// A target id names files: letters, digits, `-`, `_` and `.`, not

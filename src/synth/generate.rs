@@ -290,6 +290,7 @@ impl Generator {
             let intruder_obstacles = intruders.iter().flat_map(Intruder::obstacles).collect();
             let record_scene = RecordScene::new(scene.clone(), intruder_obstacles);
             let mut record = self.record(config, i, berry, bbox, record_scene, td);
+            record.fill_task_space(&self.robot)?;
             let depth = self.measure_depth(exact_depth, &bbox, depth_rng, &mut record)?;
             out.2.push(depth);
             out.0.push(record);
@@ -381,9 +382,11 @@ impl Generator {
                 .map(|d| dataset::Demo {
                     weights: d.weights.iter().copied().collect(),
                     final_q: d.final_q(),
+                    task_weights: None,
                 })
                 .collect(),
             distribution: DistributionJson::from(&td.distribution),
+            task_distribution: None,
             annotation: td.annotation,
         }
     }

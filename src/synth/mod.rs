@@ -9,7 +9,7 @@
 //! - [`render`] — rasteriser, shading, textures, noise, the target box.
 //! - [`demos`] — IK-based, minimum-jerk, collision-checked demonstrations.
 //! - [`intruders`] — objects placed across a target's path after its demonstrations.
-//! - [`dataset`] — the on-disk format (`dpmp-dataset/2`, with depth; version 1 still loads) and its loaders.
+//! - [`dataset`] — the on-disk format (`dpmp-dataset/4`, with depth and task-space weights; versions 1 and 2 still load) and its loaders.
 //! - [`generate`] — the deterministic parallel driver.
 //! - [`stats`] — dataset statistics beside the real annotation data.
 //!

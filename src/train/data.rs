@@ -26,7 +26,7 @@ pub struct Sample {
     pub config: usize,
     /// Network input.
     pub prepared: Prepared,
-    /// Ground-truth weight distribution (as in the record).
+    /// Ground-truth weight distribution (the record's, in the model's space).
     pub distribution: WeightDistribution,
     /// `n_joints * n_basis` target means (f32, joint-major).
     pub mean: Vec<f32>,
@@ -60,16 +60,48 @@ pub fn manifest_sha256(dir: &Path) -> Result<String> {
     Ok(hash.iter().map(|b| format!("{b:02x}")).collect())
 }
 
+/// The weights a model learns: which space, and (task space) the robot
+/// whose kinematics derive them for datasets written before format 4.
+#[derive(Clone, Copy)]
+pub enum Targets<'a> {
+    /// The joint-space distribution of each record.
+    Joint,
+    /// The task-space distribution ([`crate::task_space`]).
+    Task(&'a crate::robot::Robot),
+}
+
+impl<'a> Targets<'a> {
+    /// The targets of a model in `space` for `robot`.
+    pub fn of(space: crate::net::Space, robot: &'a crate::robot::Robot) -> Targets<'a> {
+        match space {
+            crate::net::Space::Joint => Targets::Joint,
+            crate::net::Space::Task => Targets::Task(robot),
+        }
+    }
+
+    fn distribution(&self, record: &dataset::TargetRecord) -> Result<WeightDistribution> {
+        match self {
+            Targets::Joint => record.weight_distribution(),
+            Targets::Task(robot) => record.task_space_distribution(robot),
+        }
+    }
+}
+
 /// Load and preprocess one split (`train`, `val`, `test` or `all`) with
-/// the dataset loader of [`crate::synth::dataset`]; images are decoded in
-/// parallel.
-pub fn load_split(dir: &Path, split: &str, preprocess: &PreprocessConfig) -> Result<Dataset> {
+/// the dataset loader of [`crate::synth::dataset`], the weights of
+/// `targets`; images are decoded in parallel.
+pub fn load_split(
+    dir: &Path,
+    split: &str,
+    preprocess: &PreprocessConfig,
+    targets: Targets,
+) -> Result<Dataset> {
     let manifest = dataset::load_manifest(dir)?;
     let manifest_sha256 = manifest_sha256(dir)?;
     let entries = manifest.split(split)?;
     let samples = entries
         .par_iter()
-        .map(|entry| load_sample(dir, entry, preprocess))
+        .map(|entry| load_sample(dir, entry, preprocess, targets))
         .collect::<Result<Vec<_>>>()?;
     Ok(Dataset {
         dir: dir.to_path_buf(),
@@ -81,15 +113,20 @@ pub fn load_split(dir: &Path, split: &str, preprocess: &PreprocessConfig) -> Res
     })
 }
 
-fn load_sample(dir: &Path, entry: &TargetEntry, preprocess: &PreprocessConfig) -> Result<Sample> {
+fn load_sample(
+    dir: &Path,
+    entry: &TargetEntry,
+    preprocess: &PreprocessConfig,
+    targets: Targets,
+) -> Result<Sample> {
     let record = dataset::load_record(dir, entry)?;
     let image = dataset::load_image(dir, entry)?;
     let record_path = dir.join(&entry.record);
     let mut prepared = preprocess::prepare(&image, record.bbox, entry.mask_applied, preprocess)
         .map_err(|e| Error::file(&record_path, e.to_string()))?;
     prepared.depth_m = record.target_depth_m;
-    let distribution = record
-        .weight_distribution()
+    let distribution = targets
+        .distribution(&record)
         .map_err(|e| Error::file(&record_path, e.to_string()))?;
     let (mean, cov_blocks) = block_targets(&distribution);
     Ok(Sample {

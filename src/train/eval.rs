@@ -5,7 +5,9 @@
 //! - Table III: final-point TCP position error (m) and quaternion distance
 //!   `min(|q - q'|, |q + q'|)` (Eq. 9) between the predicted and the
 //!   ground-truth distribution, for the mean trajectory and for the
-//!   trajectories 3 sigma above and below it (joint space);
+//!   trajectories 3 sigma above and below it, in the model's space (a
+//!   joint-space model's final configurations through the TCP forward
+//!   kinematics, a task-space model's final poses as they are);
 //! - beside Table III, the mean trajectory's final-point error per
 //!   base-frame axis next to the ground truth's spread on that axis: a model
 //!   that learned nothing about an axis (e.g. depth, which a single image
@@ -13,8 +15,10 @@
 //! - Table II: the Davies–Bouldin index of a 2-D embedding of the latent
 //!   vectors labelled by plant configuration, with a scatter plot.
 //!
-//! Forward kinematics is passed in (`crate::robot::Robot::tcp_pose` in the
-//! CLI), so this module does not depend on a particular robot.
+//! The map from a final point to a pose is passed in
+//! (`crate::robot::Robot::tcp_pose` for a joint-space model, the row read
+//! as position and quaternion for a task-space one), so this module does
+//! not depend on a particular robot or space.
 
 use super::data::{target_tensors, Sample};
 use super::embedding::{davies_bouldin, embed, plot_embedding, Embedding};
@@ -56,7 +60,7 @@ pub struct FinalPointError {
     pub max_position_m: f64,
 }
 
-/// Table III: mean and +-3 sigma trajectories, joint space.
+/// Table III: mean and +-3 sigma trajectories, in the model's space.
 #[derive(Clone, Debug, Serialize)]
 pub struct FinalPointTable {
     /// The mean trajectory.
@@ -118,6 +122,9 @@ pub struct EvalReport {
     pub arch: String,
     /// Whether the model was latent-tuned.
     pub latent_tuning: bool,
+    /// The space of the model's trajectories (`joint` or `task`): Table
+    /// III's half.
+    pub space: String,
     /// Split evaluated.
     pub split: String,
     /// Number of targets.
@@ -220,6 +227,7 @@ pub fn evaluate(
         model: config.name.clone(),
         arch: config.arch.as_str().into(),
         latent_tuning: config.latent_tuning,
+        space: config.space.as_str().into(),
         split: split.into(),
         targets: samples.len(),
         alpha,
@@ -296,14 +304,28 @@ pub fn to_markdown(report: &EvalReport) -> String {
         report.targets
     );
     s += &format!(
-        "## Table I — Eq. 7 per joint (alpha = {})\n\n",
+        "## Table I — Eq. 7 per {} (alpha = {})\n\n",
+        if report.space == "task" {
+            "dimension"
+        } else {
+            "joint"
+        },
         report.alpha
     );
-    s += "| joint | mean MSE (rad²) | mean RMSE (rad) | cov MSE | Eq. 7 |\n|---|---|---|---|---|\n";
+    let task = report.space == crate::net::Space::Task.as_str();
+    s += if task {
+        "| dimension | mean MSE | mean RMSE (m or quaternion units) | cov MSE | Eq. 7 |\n|---|---|---|---|---|\n"
+    } else {
+        "| joint | mean MSE (rad²) | mean RMSE (rad) | cov MSE | Eq. 7 |\n|---|---|---|---|---|\n"
+    };
     for r in &report.table1 {
+        let name = match crate::task_space::TASK_DIM_NAMES.get(r.joint - 1) {
+            Some(dim) if task => dim.to_string(),
+            _ => format!("J{}", r.joint),
+        };
         s += &format!(
-            "| J{} | {:.3e} | {:.4} | {:.3e} | {:.3e} |\n",
-            r.joint, r.mean_mse, r.mean_rmse_rad, r.cov_mse, r.eq7
+            "| {name} | {:.3e} | {:.4} | {:.3e} | {:.3e} |\n",
+            r.mean_mse, r.mean_rmse_rad, r.cov_mse, r.eq7
         );
     }
     s += &format!("| total | | | | {:.3e} |\n\n", report.eq7_total);
@@ -340,7 +362,8 @@ pub fn to_markdown(report: &EvalReport) -> String {
         "| {} | {} | {} |\n\n",
         report.table2.method, report.table2.clusters, db
     );
-    s += "## Table III — final point, joint space\n\n| trajectory | position (m) | orientation (Eq. 9) | max position (m) |\n|---|---|---|---|\n";
+    s += &format!("## Table III — final point, {} space\n\n", report.space);
+    s += "| trajectory | position (m) | orientation (Eq. 9) | max position (m) |\n|---|---|---|---|\n";
     for (name, e) in [
         ("mean", &report.table3.mean),
         ("+3σ", &report.table3.plus_3sigma),

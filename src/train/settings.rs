@@ -4,7 +4,7 @@
 //! anything is read or written.
 
 use super::phases::Phase;
-use crate::net::{Arch, ModelConfig};
+use crate::net::{Arch, ModelConfig, Space};
 use crate::{Error, Result};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -48,6 +48,8 @@ pub struct TrainSettings {
     /// Condition the cVAE on the target's measured depth as well as the
     /// box centre (the dataset must have depth).
     pub depth_condition: bool,
+    /// The space of the predicted weights (`--space`).
+    pub space: Space,
     /// Seed of every random choice.
     pub seed: u64,
     /// Maximum epochs of tp1.
@@ -98,6 +100,7 @@ impl TrainSettings {
             arch,
             latent_tuning: false,
             depth_condition: false,
+            space: Space::Joint,
             seed: 0,
             epochs_tp1: 30,
             epochs_tp2: 60,
@@ -147,6 +150,19 @@ impl TrainSettings {
                 format!("must be in [0, 1), got {}", self.latent_dropout),
             ));
         }
+        if self.space == Space::Task {
+            for (name, v) in [
+                ("tcp_weight", self.tcp_weight),
+                ("start_weight", self.start_weight),
+            ] {
+                if v != 0.0 {
+                    return Err(Error::invalid(
+                        name,
+                        "is a joint-space term; a task-space model trains on the paper's losses (Eq. 7 / Eq. 8) alone",
+                    ));
+                }
+            }
+        }
         if self.patience == 0 {
             return Err(Error::invalid("patience", "must be at least 1"));
         }
@@ -187,7 +203,7 @@ impl TrainSettings {
     /// tp1 and tp2 are exactly those of the run with latent tuning).
     pub(super) fn fingerprint(&self, manifest_sha256: &str) -> String {
         format!(
-            "{}|{}|{}|{}|{}|{}|{}|{}|{}|{}|{:?}|{}",
+            "{}|{}|{}|{}|{}|{}|{}|{}|{}|{}|{:?}|{}{}",
             self.arch.as_str(),
             self.seed,
             self.batch,
@@ -199,7 +215,13 @@ impl TrainSettings {
             self.latent_dropout,
             self.lr_final_ratio,
             self.shape,
-            manifest_sha256
+            manifest_sha256,
+            // Joint-space runs keep the fingerprint they had before spaces.
+            if self.space == Space::Task {
+                "|task"
+            } else {
+                ""
+            }
         )
     }
 }

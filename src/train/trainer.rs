@@ -5,7 +5,7 @@
 //! (resumable with identical results), and writes the best model.
 
 use super::adam::{Adam, AdamParams};
-use super::data::{load_split, Dataset};
+use super::data::{load_split, Dataset, Targets};
 use super::log::{plot_loss_curves, EpochRecord, MetricsLog};
 use super::losses::TrajectoryOperator;
 use super::norm::output_norm;
@@ -90,15 +90,26 @@ pub fn train(settings: &TrainSettings) -> Result<TrainOutcome> {
 pub fn train_for(settings: &TrainSettings, robot: &crate::robot::Robot) -> Result<TrainOutcome> {
     settings.validate()?;
     let device = Device::Cpu;
-    let train_set = load_split(&settings.data, "train", &default_preprocess(settings))?;
-    let val_set = load_split(&settings.data, "val", &default_preprocess(settings))?;
+    let targets = Targets::of(settings.space, robot);
+    let train_set = load_split(
+        &settings.data,
+        "train",
+        &default_preprocess(settings),
+        targets,
+    )?;
+    let val_set = load_split(
+        &settings.data,
+        "val",
+        &default_preprocess(settings),
+        targets,
+    )?;
     check_splits(settings, &train_set, &val_set)?;
     if let Some(identity) = &train_set.robot {
         let name = format!("dataset {}", settings.data.display());
         identity.check(robot, &name)?;
     }
     let mut config = build_config(settings, &train_set, val_set.samples.len())?;
-    if config.n_joints != robot.dof() {
+    if settings.space == crate::net::Space::Joint && config.n_joints != robot.dof() {
         return Err(Error::invalid(
             "robot",
             format!(
@@ -163,6 +174,7 @@ fn build_config(settings: &TrainSettings, train: &Dataset, n_val: usize) -> Resu
         .unwrap_or_else(|| "model".into());
     let mut config = ModelConfig::new(&name, settings.arch);
     config.latent_tuning = settings.latent_tuning;
+    config.space = settings.space;
     config.depth_condition = settings.depth_condition;
     if settings.depth_condition {
         if let Some(s) = train.samples.iter().find(|s| s.prepared.depth_m.is_none()) {

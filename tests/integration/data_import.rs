@@ -62,7 +62,7 @@ fn the_worked_example_imports_trains_and_plans() {
 
     // Splits keep each plant together.
     let written = read_json(&data.join("manifest.json"));
-    assert_eq!(written["format"], "dpmp-dataset/3");
+    assert_eq!(written["format"], "dpmp-dataset/5");
     let group_of = |id: &str| id.split('-').next().unwrap().to_string();
     let mut seen = std::collections::HashMap::new();
     for split in ["train", "val", "test"] {
@@ -359,4 +359,94 @@ fn annotation_folders_are_a_prior_source() {
     let recorded: Vec<f64> =
         serde_json::from_value(record["final_tcp"]["position"].clone()).unwrap();
     assert!((tcp - nalgebra::Vector3::from_row_slice(&recorded)).norm() < 1e-12);
+}
+
+/// A TCP recording (`time,x,y,z,qx,qy,qz,qw`) of a joint recording, by FK
+/// row by row, the quaternion's sign flipped on odd rows as some loggers do.
+fn tcp_recording(joint_csv: &Path, robot: &Robot) -> String {
+    let text = std::fs::read_to_string(joint_csv).unwrap();
+    let mut out = String::from("time,x,y,z,qx,qy,qz,qw\n");
+    for (k, line) in text.lines().skip(1).enumerate() {
+        let cells: Vec<f64> = line.split(',').map(|v| v.parse().unwrap()).collect();
+        let pose = robot.tcp_pose(&cells[1..8]);
+        let p = pose.translation.vector;
+        let sign = if k % 2 == 1 { -1.0 } else { 1.0 };
+        let c = pose.rotation.coords * sign;
+        out += &format!(
+            "{},{},{},{},{},{},{},{}\n",
+            cells[0], p.x, p.y, p.z, c[0], c[1], c[2], c[3]
+        );
+    }
+    out
+}
+
+#[test]
+fn tcp_recordings_give_the_task_space_weights_fk_derives() {
+    // The example's targets with TCP recordings of their demonstrations:
+    // the fitted task-space distribution is the one derived from the joint
+    // recordings by FK (the recordings are smooth; fit residuals only).
+    let dir = tempfile::tempdir().unwrap();
+    let robot = Robot::panda().unwrap();
+    let plain = edited_manifest(dir.path(), |_| {});
+    let derived_dir = dir.path().join("derived");
+    import(&plain, &derived_dir);
+    let tcp_dir = dir.path().join("tcp");
+    std::fs::create_dir_all(&tcp_dir).unwrap();
+    let mut manifest = read_json(&plain);
+    for t in manifest["targets"].as_array_mut().unwrap() {
+        let files: Vec<Value> = t["demos"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .enumerate()
+            .map(|(k, d)| {
+                let path = tcp_dir.join(format!("{}-{k}.csv", t["id"].as_str().unwrap()));
+                std::fs::write(&path, tcp_recording(Path::new(d.as_str().unwrap()), &robot))
+                    .unwrap();
+                json!(path)
+            })
+            .collect();
+        t["task_demos"] = json!(files);
+    }
+    let with_tcp = dir.path().join("with_tcp.json");
+    std::fs::write(&with_tcp, manifest.to_string()).unwrap();
+    let fitted_dir = dir.path().join("fitted");
+    import(&with_tcp, &fitted_dir);
+    for t in manifest["targets"].as_array().unwrap() {
+        let file = format!("targets/{}.json", t["id"].as_str().unwrap());
+        let (a, b) = (
+            read_json(&derived_dir.join(&file)),
+            read_json(&fitted_dir.join(&file)),
+        );
+        let mean = |r: &Value| numbers(&r["task_distribution"]["mean"]);
+        let (ma, mb) = (mean(&a), mean(&b));
+        assert_eq!(ma.len(), 56);
+        let diff = ma
+            .iter()
+            .zip(&mb)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f64::max);
+        assert!(diff < 1e-3, "{file}: task-space means differ by {diff}");
+        assert_eq!(b["demos"][0]["task_weights"].as_array().unwrap().len(), 56);
+    }
+    // One recording fewer than the demonstrations is refused by name.
+    let mut short = manifest.clone();
+    short["targets"][0]["task_demos"]
+        .as_array_mut()
+        .unwrap()
+        .pop();
+    let path = dir.path().join("short.json");
+    std::fs::write(&path, short.to_string()).unwrap();
+    let o = dpmp(&[
+        "data",
+        "import",
+        "--manifest",
+        arg(&path),
+        "--out",
+        arg(&dir.path().join("short")),
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    let err = stderr(&o);
+    assert!(err.contains("task_demos"), "{err}");
+    assert!(!dir.path().join("short").exists());
 }

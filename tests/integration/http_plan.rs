@@ -432,6 +432,43 @@ fn a_derived_goal_takes_the_request_s_approach_direction() {
     }
 }
 
+#[test]
+fn via_points_shape_a_plan_too() {
+    // The free plan's TCP halfway through, moved 3 cm up: a plan through
+    // it passes within the waypoint's tolerance at that time.
+    let server = start_with_default_model();
+    let c = client();
+    let url = server.url("/v1/plan");
+    let (jpeg, depth, record) = generated_target_with_depth();
+    let (_, body) = depth_request(&jpeg, &depth, &record);
+    let (s, free) = post_json(&c, &url, body.to_string());
+    assert_eq!(s, 200, "{free}");
+    let robot = Robot::panda().unwrap();
+    let points = free["trajectory"]["points"].as_array().unwrap();
+    let middle = &points[points.len() / 2];
+    let time_s = middle["time_from_start"].as_f64().unwrap();
+    let tcp_at = |p: &Value| robot.tcp_pose(&numbers(&p["positions"])).translation.vector;
+    let via = tcp_at(middle) + nalgebra::Vector3::new(0.0, 0.0, 0.03);
+    let mut asked = body.clone();
+    asked["via_points"] =
+        json!([{"time_s": time_s, "position": [via.x, via.y, via.z], "tolerance_m": 0.005}]);
+    let (s, answer) = post_json(&c, &url, asked.to_string());
+    assert_eq!(s, 200, "{answer}");
+    assert_valid(&openapi(), "post", "/v1/plan", s, &answer);
+    assert_eq!(answer["status"], "optimal", "{}", answer["reason"]);
+    let points = answer["trajectory"]["points"].as_array().unwrap();
+    let at = points
+        .iter()
+        .find(|p| (p["time_from_start"].as_f64().unwrap() - time_s).abs() < 1e-9)
+        .expect("a sample at the waypoint's time");
+    let miss = (tcp_at(at) - via).norm();
+    assert!(
+        miss <= 0.005 + 1e-6,
+        "the TCP passes {miss} m from the waypoint"
+    );
+    assert!(answer["report"]["via_position_excess_m"].as_f64().unwrap() <= 1e-6);
+}
+
 /// A copy of the shipped model whose head weights are scaled by 1e30 (its
 /// checksum updated, so it loads): its predictions overflow.
 fn broken_model_copy() -> tempfile::TempDir {

@@ -49,3 +49,4 @@ mod scene_obstacles;
 mod scene_points;
 mod synth_dataset;
 mod synth_demos;
+mod task_space;

@@ -308,13 +308,14 @@ fn the_library_never_imports_its_shells() {
 
 /// The modules a request runs through (`/v1/plan`, `/v1/optimize`, `dpmp
 /// plan`), as the crate docs group them.
-const LIVE_PATH: [&str; 10] = [
+const LIVE_PATH: [&str; 11] = [
     "promp",
     "geometry",
     "robot",
     "scene",
     "perception",
     "net",
+    "task_space",
     "plan",
     "optim",
     "error",

@@ -373,7 +373,13 @@ fn preprocessing_is_identical_in_training_and_inference_paths() {
     let dir = tempfile::tempdir().unwrap();
     crate::common::net::write_dataset(dir.path(), 2, 3, 64, 48, 4);
     let config = tiny_config(Arch::Cvae);
-    let data = dpmp::train::data::load_split(dir.path(), "train", &config.preprocess).unwrap();
+    let data = dpmp::train::data::load_split(
+        dir.path(),
+        "train",
+        &config.preprocess,
+        dpmp::train::data::Targets::Joint,
+    )
+    .unwrap();
     let model = Model::from_network(Network::new(config, 0, &Device::Cpu).unwrap());
     for sample in &data.samples {
         let image = image::open(dir.path().join(format!("images/{}.png", sample.id))).unwrap();

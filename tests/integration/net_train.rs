@@ -199,8 +199,13 @@ fn every_architecture_trains_and_evaluates() {
         assert_eq!(phases, expected);
         let model = Model::load(&out).unwrap();
         assert_eq!(model.config().latent_tuning, tuning);
-        let samples =
-            dpmp::train::data::load_split(&data, "all", &model.config().preprocess).unwrap();
+        let samples = dpmp::train::data::load_split(
+            &data,
+            "all",
+            &model.config().preprocess,
+            dpmp::train::data::Targets::Joint,
+        )
+        .unwrap();
         let (report, embedding) =
             dpmp::train::eval::evaluate(&model, &samples.samples, "all", 1.0, &toy_fk).unwrap();
         assert_eq!(report.targets, 12);

@@ -112,6 +112,7 @@ pub fn write_dataset(
                 promp: promp.clone(),
                 demos: vec![],
                 distribution: DistributionJson { mean, cov },
+                task_distribution: None,
                 annotation: dpmp::promp::annotation::joints_from_distribution(&distribution)
                     .unwrap(),
             };
