@@ -383,15 +383,22 @@ fn the_service_refuses_a_model_trained_for_another_robot() {
     assert!(AppState::new(test_config(), hand, Some(Model::from_network(network))).is_ok());
 }
 
+/// The server, client, URL, body and answer of the plan with depth and
+/// no other constraint.
+fn free_depth_plan() -> (
+    RunningServer,
+    reqwest::blocking::Client,
+    String,
+    Value,
+    Value,
+) {
+    let p = plan_generated_target_with_depth();
+    (p._server, p.c, p.url, p.body, p.answer)
+}
+
 #[test]
 fn a_derived_goal_takes_the_request_s_approach_direction() {
-    let server = start_with_default_model();
-    let c = client();
-    let url = server.url("/v1/plan");
-    let (jpeg, depth, record) = generated_target_with_depth();
-    let (_, body) = depth_request(&jpeg, &depth, &record);
-    let (s, free) = post_json(&c, &url, body.to_string());
-    assert_eq!(s, 200, "{free}");
+    let (_server, c, url, body, free) = free_depth_plan();
     let robot = Robot::panda().unwrap();
     let final_axis =
         |answer: &Value| final_tcp_pose(&robot, answer).rotation * nalgebra::Vector3::z();
@@ -436,13 +443,7 @@ fn a_derived_goal_takes_the_request_s_approach_direction() {
 fn via_points_shape_a_plan_too() {
     // The free plan's TCP halfway through, moved 3 cm up: a plan through
     // it passes within the waypoint's tolerance at that time.
-    let server = start_with_default_model();
-    let c = client();
-    let url = server.url("/v1/plan");
-    let (jpeg, depth, record) = generated_target_with_depth();
-    let (_, body) = depth_request(&jpeg, &depth, &record);
-    let (s, free) = post_json(&c, &url, body.to_string());
-    assert_eq!(s, 200, "{free}");
+    let (_server, c, url, body, free) = free_depth_plan();
     let robot = Robot::panda().unwrap();
     let points = free["trajectory"]["points"].as_array().unwrap();
     let middle = &points[points.len() / 2];
