@@ -1,5 +1,7 @@
 //! Forward kinematics of every Panda link, the TCP Jacobian and IK
-//! (target: FK of all links ≤ 1 µs per configuration).
+//! (target: FK of all links ≤ 1 µs per configuration), and a task-space
+//! distribution turned into a joint-space prior (64 IK-tracked draws, what
+//! a plan with a task-space model adds).
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use dpmp::robot::{IkOptions, IkTarget, Robot, PANDA_HOME};
@@ -28,5 +30,31 @@ fn kinematics(c: &mut Criterion) {
     });
 }
 
-criterion_group!(benches, kinematics);
+fn task_space_prior(c: &mut Criterion) {
+    use dpmp::promp::{Basis, PrompConfig};
+    use dpmp::task_space::{joint_prior, task_distribution, JointPriorOptions};
+    let robot = Robot::panda().expect("the shipped Panda loads");
+    let basis = Basis::new(&PrompConfig::default()).expect("default basis");
+    let demos: Vec<Vec<f64>> = dpmp::fixtures::demonstrations::demonstrations(
+        &dpmp::fixtures::demonstrations::TYPICAL_FINAL,
+        10,
+        basis.n_samples(),
+        3,
+    )
+    .iter()
+    .map(|d| {
+        let w = dpmp::promp::fit::fit_weights(&basis, d).expect("fit");
+        w.as_slice().to_vec()
+    })
+    .collect();
+    let refs: Vec<&[f64]> = demos.iter().map(Vec::as_slice).collect();
+    let reference = robot.tcp_pose(&PANDA_HOME).rotation;
+    let task = task_distribution(&basis, &robot, &refs, &reference).expect("task space");
+    let options = JointPriorOptions::default();
+    c.bench_function("task_space_joint_prior_64_draws", |b| {
+        b.iter(|| joint_prior(&robot, &basis, &task, &PANDA_HOME, &options, &|| false))
+    });
+}
+
+criterion_group!(benches, kinematics, task_space_prior);
 criterion_main!(benches);
