@@ -1,7 +1,7 @@
 //! Forward kinematics of every Panda link, the TCP Jacobian and IK
 //! (target: FK of all links ≤ 1 µs per configuration), and a task-space
 //! distribution turned into a joint-space prior (64 IK-tracked draws, what
-//! a plan with a task-space model adds).
+//! a plan with a task-space model adds, or the linearised propagation).
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use dpmp::robot::{IkOptions, IkTarget, Robot, PANDA_HOME};
@@ -53,6 +53,13 @@ fn task_space_prior(c: &mut Criterion) {
     let options = JointPriorOptions::default();
     c.bench_function("task_space_joint_prior_64_draws", |b| {
         b.iter(|| joint_prior(&robot, &basis, &task, &PANDA_HOME, &options, &|| false))
+    });
+    let linearised = JointPriorOptions {
+        propagation: dpmp::task_space::Propagation::Linearised,
+        ..JointPriorOptions::default()
+    };
+    c.bench_function("task_space_joint_prior_linearised", |b| {
+        b.iter(|| joint_prior(&robot, &basis, &task, &PANDA_HOME, &linearised, &|| false))
     });
 }
 

@@ -107,6 +107,44 @@ impl Space {
     }
 }
 
+/// How a task-space model's distribution becomes the optimiser's
+/// joint-space prior ([`crate::task_space::joint_prior`]); recorded in the
+/// model's `config.json` as `task_prior` (absent: 64 draws).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TaskPriorSettings {
+    /// `draws` (default) or `linearised`.
+    #[serde(default)]
+    pub propagation: crate::task_space::Propagation,
+    /// Draws tracked, the mean included (2..=1024; draws only).
+    #[serde(default = "default_task_draws")]
+    pub draws: usize,
+}
+
+fn default_task_draws() -> usize {
+    crate::task_space::JointPriorOptions::default().draws
+}
+
+impl Default for TaskPriorSettings {
+    fn default() -> Self {
+        TaskPriorSettings {
+            propagation: crate::task_space::Propagation::Draws,
+            draws: default_task_draws(),
+        }
+    }
+}
+
+impl TaskPriorSettings {
+    /// The tracking options these settings give.
+    pub fn options(&self) -> crate::task_space::JointPriorOptions {
+        crate::task_space::JointPriorOptions {
+            propagation: self.propagation,
+            draws: self.draws,
+            ..Default::default()
+        }
+    }
+}
+
 /// Per-output affine map from the heads' raw outputs to weight means and
 /// covariance codes: `value = raw * scale + offset`, one entry per joint and
 /// output (`n_joints x (n_basis + n_basis (n_basis + 1) / 2)`, joint-major).
@@ -213,6 +251,10 @@ pub struct ModelConfig {
     /// The space of the predicted weights (configs without it: joint).
     #[serde(default, skip_serializing_if = "Space::is_joint")]
     pub space: Space,
+    /// A task-space model's joint-space prior settings (absent: the
+    /// defaults).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub task_prior: Option<TaskPriorSettings>,
     /// Latent vector size (the paper: 256).
     pub latent_dim: usize,
     /// Output channels of each encoder conv block (each halves the size).
@@ -265,6 +307,7 @@ impl ModelConfig {
             arch,
             latent_tuning: false,
             space: Space::Joint,
+            task_prior: None,
             latent_dim: 256,
             encoder_channels: vec![8, 16, 32, 32],
             head_hidden: vec![256, 128, 64, 32],
@@ -353,6 +396,15 @@ impl ModelConfig {
                     self.n_joints
                 ),
             ));
+        }
+        if let Some(t) = &self.task_prior {
+            if self.space != Space::Task {
+                return Err(Error::invalid(
+                    "task_prior",
+                    "only a task-space model (space: task) has a task-space prior",
+                ));
+            }
+            check_range("task_prior.draws", t.draws, 2, 1024)?;
         }
         if self.format != MODEL_FORMAT {
             return Err(Error::invalid(
@@ -481,6 +533,23 @@ mod tests {
             config.validate().unwrap_err().field(),
             Some("latent_tuning")
         );
+        let mut config = ModelConfig::new("x", Arch::Cvae);
+        config.task_prior = Some(TaskPriorSettings::default());
+        assert_eq!(config.validate().unwrap_err().field(), Some("task_prior"));
+        config.space = Space::Task;
+        config.validate().unwrap();
+        config.task_prior = Some(TaskPriorSettings {
+            draws: 1,
+            ..TaskPriorSettings::default()
+        });
+        assert_eq!(
+            config.validate().unwrap_err().field(),
+            Some("task_prior.draws")
+        );
+        let linear: TaskPriorSettings =
+            serde_json::from_str(r#"{"propagation": "linearised"}"#).unwrap();
+        assert_eq!(linear.draws, 64);
+        assert!(serde_json::from_str::<TaskPriorSettings>(r#"{"method": "x"}"#).is_err());
         assert!(Arch::parse("gan").is_err());
         assert_eq!(Arch::parse("cvae").unwrap(), Arch::Cvae);
     }

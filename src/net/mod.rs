@@ -27,7 +27,7 @@ pub mod resize;
 #[cfg(test)]
 mod test_support;
 
-pub use config::{Arch, ModelConfig, OutputNorm, Space};
+pub use config::{Arch, ModelConfig, OutputNorm, Space, TaskPriorSettings};
 pub use covariance::CovarianceDecoder;
 pub use models::{Network, ParamGroup};
 pub use predict::{candle_error, Model, Prediction};

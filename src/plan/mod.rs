@@ -47,7 +47,7 @@ use crate::promp::distribution::matrix_rows;
 use crate::promp::{Basis, WeightDistribution};
 use crate::robot::Robot;
 use crate::scene::ObstacleShape;
-use crate::task_space::{joint_prior, JointPriorOptions, JointPriorReport};
+use crate::task_space::{joint_prior, JointPriorReport};
 use crate::{Error, Result};
 use goal::{goal_from_target, locate};
 use serde::Serialize;
@@ -198,9 +198,9 @@ pub fn predict_and_optimize(
 }
 
 /// A task-space model's prediction as the joint-space prior the optimiser
-/// takes ([`crate::task_space::joint_prior`], tracked from the task's start
-/// or the robot's home), with its tracking report; a joint-space model's
-/// as it is.
+/// takes ([`crate::task_space::joint_prior`] with the model's
+/// [`crate::net::TaskPriorSettings`], tracked from the task's start or the
+/// robot's home), with its tracking report; a joint-space model's as it is.
 fn joint_space(
     model: &Model,
     robot: &Robot,
@@ -213,7 +213,7 @@ fn joint_space(
         return Ok((predicted, None));
     }
     let start = start.map_or_else(|| robot.home(), <[f64]>::to_vec);
-    let options = JointPriorOptions::default();
+    let options = model.config().task_prior.unwrap_or_default().options();
     let (prior, report) = joint_prior(robot, basis, &predicted, &start, &options, &|| {
         ctl.should_stop()
     })

@@ -21,12 +21,31 @@ use crate::{Error, Result};
 use nalgebra::{DMatrix, DVector, Isometry3, Matrix6, Vector6};
 use rand::SeedableRng;
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
+
+/// How the task-space covariance reaches joint space.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Propagation {
+    /// Track draws of the distribution and fit the joint ProMP to them
+    /// (Monte Carlo: follows the IK's non-linearity, costs a tracking pass
+    /// per draw).
+    #[default]
+    Draws,
+    /// Track the mean only and map the covariance through the tracking's
+    /// linearisation at it (`A Σ Aᵀ`, `A` the damped pseudo-inverse of
+    /// the pose Jacobian along the mean, between the two bases): one
+    /// tracking pass.
+    Linearised,
+}
 
 /// Settings of [`joint_prior`].
 #[derive(Clone, Debug)]
 pub struct JointPriorOptions {
-    /// Task-space draws tracked (the mean is always the first).
+    /// How the covariance is propagated.
+    pub propagation: Propagation,
+    /// Task-space draws tracked (the mean is always the first; with
+    /// [`Propagation::Linearised`] only the mean).
     pub draws: usize,
     /// Seed of the draws.
     pub seed: u64,
@@ -47,6 +66,7 @@ pub struct JointPriorOptions {
 impl Default for JointPriorOptions {
     fn default() -> Self {
         JointPriorOptions {
+            propagation: Propagation::Draws,
             draws: 64,
             seed: 0,
             iterations_per_sample: 10,
@@ -88,19 +108,61 @@ pub fn joint_prior(
     stop: &(dyn Fn() -> bool + Sync),
 ) -> Result<(WeightDistribution, JointPriorReport)> {
     check_inputs(robot, basis, task, start, options)?;
+    let inputs = Inputs {
+        robot,
+        basis,
+        task,
+        start,
+        options,
+        stop,
+    };
+    match options.propagation {
+        Propagation::Draws => by_draws(&inputs),
+        Propagation::Linearised => linearised(&inputs),
+    }
+}
+
+/// What [`joint_prior`] was given, checked.
+struct Inputs<'a> {
+    robot: &'a Robot,
+    basis: &'a Basis,
+    task: &'a WeightDistribution,
+    start: &'a [f64],
+    options: &'a JointPriorOptions,
+    stop: &'a (dyn Fn() -> bool + Sync),
+}
+
+impl Inputs<'_> {
+    /// `Err(Cancelled)` when the caller says stop.
+    fn check_stop(&self) -> Result<()> {
+        if (self.stop)() {
+            return Err(Error::Cancelled(
+                "the deadline passed while the task-space prior was tracked".into(),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Track the task-space trajectory of weights `w` from the start.
+    fn track_weights(&self, w: &DVector<f64>) -> Result<Tracked> {
+        let poses = trajectory_from_weights(self.basis, w.as_slice(), TASK_DIMS);
+        track(self.robot, &poses, self.start, self.options)
+    }
+}
+
+/// [`Propagation::Draws`]: the mean and `draws - 1` seeded draws tracked in
+/// parallel (collected in order), the joint ProMP fitted to them about the
+/// tracked mean.
+fn by_draws(inputs: &Inputs) -> Result<(WeightDistribution, JointPriorReport)> {
+    let (robot, basis, task, options) = (inputs.robot, inputs.basis, inputs.task, inputs.options);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(options.seed);
     let mut draws = vec![task.mean.clone()];
     draws.extend(task.sample(&mut rng, options.draws - 1));
     let tracked = draws
         .par_iter()
         .map(|w| {
-            if stop() {
-                return Err(Error::Cancelled(
-                    "the deadline passed while the task-space prior was tracked".into(),
-                ));
-            }
-            let poses = trajectory_from_weights(basis, w.as_slice(), TASK_DIMS);
-            track(robot, &poses, start, options)
+            inputs.check_stop()?;
+            inputs.track_weights(w)
         })
         .collect::<Result<Vec<Tracked>>>()?;
     let weights = tracked
@@ -121,6 +183,92 @@ pub fn joint_prior(
             .fold(0.0, f64::max),
     };
     Ok((prior, report))
+}
+
+/// [`Propagation::Linearised`]: the tracked mean, and the task-space
+/// covariance mapped through `A = P · blockdiag_t(J_t⁺ G_t) · Φ` (`Φ` the
+/// task basis, `G_t` the quaternion-to-angular-velocity map at the mean,
+/// `J_t⁺` the damped pseudo-inverse of the weighted pose Jacobian at the
+/// tracked configuration, `P` the joint basis' least-squares projector).
+fn linearised(inputs: &Inputs) -> Result<(WeightDistribution, JointPriorReport)> {
+    let (robot, basis, task, options) = (inputs.robot, inputs.basis, inputs.task, inputs.options);
+    inputs.check_stop()?;
+    let poses = trajectory_from_weights(basis, task.mean.as_slice(), TASK_DIMS);
+    let tracked = track(robot, &poses, inputs.start, options)?;
+    let mean = fit_weights(basis, &tracked.joints)?;
+    let (n, nb, w) = (robot.dof(), basis.n_basis(), options.orientation_weight_m);
+    let (phi, projector) = (basis.matrix(), basis.projector());
+    let mut a = DMatrix::<f64>::zeros(n * nb, TASK_DIMS * nb);
+    for t in 0..basis.n_samples() {
+        let q: Vec<f64> = tracked.joints.row(t).iter().copied().collect();
+        let row: Vec<f64> = poses.row(t).iter().copied().collect();
+        let b = damped_pseudo_inverse(robot, &q, w, options.damping) * pose_rate(&row, w);
+        for j in 0..n {
+            for d in 0..TASK_DIMS {
+                let bjd = b[(j, d)];
+                if bjd == 0.0 {
+                    continue;
+                }
+                for i in 0..nb {
+                    let pb = projector[(i, t)] * bjd;
+                    for k in 0..nb {
+                        a[(j * nb + i, d * nb + k)] += pb * phi[(t, k)];
+                    }
+                }
+            }
+        }
+    }
+    let cov = &a * &task.cov * a.transpose();
+    let prior = WeightDistribution::new(mean, (&cov + cov.transpose()) * 0.5, n, nb)?;
+    let report = JointPriorReport {
+        draws: 1,
+        mean_position_error_m: tracked.max_position_m,
+        mean_orientation_error_rad: tracked.max_orientation_rad,
+        median_draw_position_error_m: tracked.max_position_m,
+        max_final_position_error_m: tracked.final_position_m,
+    };
+    Ok((prior, report))
+}
+
+/// `Jᵀ (J Jᵀ + λ² I)⁻¹` (dof x 6) of the TCP Jacobian at `q` with its
+/// angular rows weighted by `weight`.
+fn damped_pseudo_inverse(robot: &Robot, q: &[f64], weight: f64, damping: f64) -> DMatrix<f64> {
+    let mut jac = robot.tcp_jacobian(q);
+    for r in 3..6 {
+        for c in 0..jac.ncols() {
+            jac[(r, c)] *= weight;
+        }
+    }
+    let jjt: Matrix6<f64> = &jac * jac.transpose() + Matrix6::identity() * damping * damping;
+    let inverse = jjt.try_inverse().unwrap_or_else(Matrix6::zeros);
+    DMatrix::from_iterator(jac.ncols(), 6, (jac.transpose() * inverse).iter().copied())
+}
+
+/// The weighted twist `[dp; weight·ω]` (6 x 7) per unit change of a
+/// task-space row `[p; quaternion]` at `row`: `ω = 2 (dq ⊗ q̄*)` (vector
+/// part) for the normalised quaternion `q̄`, whose own direction does not
+/// rotate.
+fn pose_rate(row: &[f64], weight: f64) -> DMatrix<f64> {
+    let mut g = DMatrix::zeros(6, TASK_DIMS);
+    for k in 0..3 {
+        g[(k, k)] = 1.0;
+    }
+    let q = nalgebra::Quaternion::new(row[6], row[3], row[4], row[5]);
+    let norm = q.norm().max(1e-12);
+    let conj = q.conjugate() / norm;
+    for (col, unit) in [
+        (3, [1.0, 0.0, 0.0, 0.0]),
+        (4, [0.0, 1.0, 0.0, 0.0]),
+        (5, [0.0, 0.0, 1.0, 0.0]),
+        (6, [0.0, 0.0, 0.0, 1.0]),
+    ] {
+        let dq = nalgebra::Quaternion::new(unit[3], unit[0], unit[1], unit[2]) / norm;
+        let omega = (dq * conj).imag() * 2.0;
+        for k in 0..3 {
+            g[(3 + k, col)] = weight * omega[k];
+        }
+    }
+    g
 }
 
 /// The distribution centred on the tracked mean (`weights[0]`) with the
@@ -308,14 +456,21 @@ mod tests {
             .collect()
     }
 
-    #[test]
-    fn the_joint_prior_of_a_task_distribution_follows_its_poses() {
+    /// The Panda, the default basis and the task-space distribution of
+    /// [`demos`].
+    fn demo_task() -> (Robot, Basis, WeightDistribution) {
         let robot = Robot::panda().unwrap();
         let basis = Basis::new(&PrompConfig::default()).unwrap();
         let joint_demos = demos(&robot, &basis);
         let refs: Vec<&[f64]> = joint_demos.iter().map(|d| d.as_slice()).collect();
         let reference = robot.tcp_pose(&crate::robot::PANDA_HOME).rotation;
         let task = task_distribution(&basis, &robot, &refs, &reference).unwrap();
+        (robot, basis, task)
+    }
+
+    #[test]
+    fn the_joint_prior_of_a_task_distribution_follows_its_poses() {
+        let (robot, basis, task) = demo_task();
         let options = JointPriorOptions {
             draws: 24,
             ..JointPriorOptions::default()
@@ -348,6 +503,35 @@ mod tests {
         // A stop ends the work with Cancelled.
         let e = joint_prior(&robot, &basis, &task, &start, &options, &|| true).unwrap_err();
         assert!(matches!(e, Error::Cancelled(_)), "{e}");
+    }
+
+    #[test]
+    fn linearised_propagation_agrees_with_the_draws() {
+        // Same mean (the tracked task mean); final-sample joint spreads
+        // within the Monte Carlo error of 256 draws plus the linearisation's.
+        let (robot, basis, task) = demo_task();
+        let start = crate::robot::PANDA_HOME.to_vec();
+        let draws = JointPriorOptions {
+            draws: 256,
+            ..JointPriorOptions::default()
+        };
+        let linear = JointPriorOptions {
+            propagation: Propagation::Linearised,
+            ..JointPriorOptions::default()
+        };
+        let (a, _) = joint_prior(&robot, &basis, &task, &start, &draws, &never).unwrap();
+        let (b, report) = joint_prior(&robot, &basis, &task, &start, &linear, &never).unwrap();
+        assert_eq!(report.draws, 1);
+        assert!((&a.mean - &b.mean).amax() < 1e-12);
+        let last = basis.n_samples() - 1;
+        let (sa, sb) = (a.trajectory_std(&basis, 0.0), b.trajectory_std(&basis, 0.0));
+        for j in 0..7 {
+            let (x, y) = (sa[(last, j)], sb[(last, j)]);
+            assert!(
+                y > 0.0 && (x - y).abs() <= 0.25 * x.max(y) + 1e-4,
+                "joint {j}: {x} vs {y}"
+            );
+        }
     }
 
     #[test]
@@ -394,9 +578,7 @@ mod tests {
             damping: f64::NAN,
             ..JointPriorOptions::default()
         };
-        let refs: Vec<&[f64]> = joint_demos.iter().map(|d| d.as_slice()).collect();
-        let reference = robot.tcp_pose(&crate::robot::PANDA_HOME).rotation;
-        let task = task_distribution(&basis, &robot, &refs, &reference).unwrap();
+        let (_, _, task) = demo_task();
         let e = joint_prior(&robot, &basis, &task, &start, &bad, &never).unwrap_err();
         assert_eq!(e.field(), Some("damping"));
         let mut short = start.clone();
