@@ -1,8 +1,8 @@
 //! Task space (the paper's second space): generated records carry each
 //! demonstration's TCP trajectory as ProMP weights, checked against the
 //! forward kinematics of the demonstrations; records of older formats
-//! derive the same weights; a task-space model trains, evaluates (Table III,
-//! task-space half) and plans through IK-tracked draws; the flags that only
+//! derive the same weights; a depth-conditioned task-space model trains,
+//! evaluates (Table III, task-space half) and plans through IK-tracked draws; the flags that only
 //! mean something in joint space are refused.
 
 use crate::common::cli::{arg, dpmp, dpmp_ok};
@@ -107,11 +107,13 @@ fn a_task_space_model_trains_evaluates_and_plans() {
     let out = dir.path().join("task-model");
     let mut s = crate::common::net::tiny_settings(&data, &out, Arch::Cvae);
     s.space = Space::Task;
+    s.depth_condition = true;
     s.epochs_tp1 = 1;
     s.epochs_tp2 = 2;
     dpmp::train::train(&s).unwrap();
     let config = read_json(&out.join("config.json"));
     assert_eq!(config["space"], "task");
+    assert_eq!(config["depth_condition"], true);
 
     // Table III's task-space half, with finite figures.
     let o = dpmp_ok(&[
@@ -166,6 +168,19 @@ fn a_task_space_model_trains_evaluates_and_plans() {
     {
         assert!((a.as_f64().unwrap() - b.as_f64().unwrap()).abs() < 1e-6);
     }
+
+    // The model's config chooses the linearised propagation: one tracked
+    // trajectory, the same tracked mean.
+    let mut linear = config.clone();
+    linear["task_prior"] = serde_json::json!({"propagation": "linearised"});
+    std::fs::write(out.join("config.json"), linear.to_string()).unwrap();
+    let o = dpmp_ok(&["plan", "--record", arg(&record_file), "--model", arg(&out)]);
+    let again: Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(again["task_space"]["draws"], 1, "{again}");
+    assert_eq!(
+        again["task_space"]["mean_position_error_m"],
+        tracking["mean_position_error_m"]
+    );
 }
 
 #[test]
