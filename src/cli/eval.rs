@@ -6,7 +6,7 @@ use crate::train::baseline::evaluate_baseline;
 use crate::train::data::load_split;
 use crate::train::data::Targets;
 use crate::train::eval::{evaluate, to_markdown, write_outputs};
-use crate::train::final_point::TcpFk;
+use crate::train::final_point::{task_final_pose, TcpFk};
 use crate::train::plan_eval::evaluate_plans;
 use crate::Error;
 use std::path::PathBuf;
@@ -66,7 +66,7 @@ pub fn run(args: EvalArgs) -> crate::Result<()> {
     let joint_fk = |q: &[f64]| robot.tcp_pose(q);
     let fk: TcpFk = match space {
         Space::Joint => &joint_fk,
-        Space::Task => &task_pose,
+        Space::Task => &task_final_pose,
     };
     let (mut report, embedding) = evaluate(&model, &data.samples, &args.split, alpha, fk)?;
     report.planning = evaluate_plans(&model, &robot, &args.data, &args.split)?;
@@ -90,12 +90,4 @@ pub fn run(args: EvalArgs) -> crate::Result<()> {
     } else {
         crate::cli::write_stdout(&to_markdown(&report))
     }
-}
-
-/// The pose of a task-space row (the quaternion normalised). A prediction
-/// whose quaternion has no direction (norm below 1e-6) scores as the
-/// identity rotation: its orientation error is then as large as it is.
-fn task_pose(row: &[f64]) -> nalgebra::Isometry3<f64> {
-    crate::task_space::pose_of_row(row)
-        .unwrap_or_else(|_| nalgebra::Isometry3::translation(row[0], row[1], row[2]))
 }
