@@ -439,26 +439,15 @@ impl TargetRecord {
                 .map(|w| w.as_slice().to_vec())
                 .collect()
         };
-        let weights = draws
-            .iter()
-            .enumerate()
-            .map(|(k, w)| {
-                crate::task_space::task_weights(&basis, robot, w, &reference)
-                    .map(|t| t.as_slice().to_vec())
-                    .map_err(|e| e.within(&format!("demos[{k}]")))
-            })
-            .collect::<Result<Vec<_>>>()?;
-        let vectors: Vec<nalgebra::DVector<f64>> = weights
-            .iter()
-            .map(|w| nalgebra::DVector::from_column_slice(w))
-            .collect();
+        let refs: Vec<&[f64]> = draws.iter().map(Vec::as_slice).collect();
+        let weights = crate::task_space::task_weight_set(&basis, robot, &refs, &reference)?;
         let distribution = crate::promp::WeightDistribution::from_demonstrations(
-            &vectors,
+            &weights,
             crate::task_space::TASK_DIMS,
             basis.n_basis(),
         )?;
         let per_demo = if self.demos.len() >= 2 {
-            weights
+            weights.iter().map(|w| w.as_slice().to_vec()).collect()
         } else {
             Vec::new()
         };

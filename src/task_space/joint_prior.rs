@@ -384,18 +384,7 @@ fn reach(
         if errors.1 < options.tolerance_m && errors.2 < options.tolerance_rad {
             break;
         }
-        let mut jac = robot.tcp_jacobian(q);
-        for r in 3..6 {
-            for c in 0..jac.ncols() {
-                jac[(r, c)] *= w;
-            }
-        }
-        let jjt: Matrix6<f64> =
-            &jac * jac.transpose() + Matrix6::identity() * options.damping * options.damping;
-        let Some(chol) = jjt.cholesky() else {
-            break;
-        };
-        let mut dq = jac.transpose() * chol.solve(&errors.0);
+        let mut dq = damped_pseudo_inverse(robot, q, w, options.damping) * &errors.0;
         let largest = dq.amax();
         if largest > options.max_step_rad {
             dq *= options.max_step_rad / largest;

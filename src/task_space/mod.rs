@@ -28,6 +28,6 @@ pub mod poses;
 
 pub use joint_prior::{joint_prior, JointPriorOptions, JointPriorReport, Propagation};
 pub use poses::{
-    continuous_quaternions, pose_of_row, task_distribution, task_trajectory, task_weights,
-    TASK_DIMS, TASK_DIM_NAMES,
+    continuous_quaternions, pose_of_row, task_distribution, task_trajectory, task_weight_set,
+    task_weights, TASK_DIMS, TASK_DIM_NAMES,
 };

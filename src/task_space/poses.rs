@@ -99,6 +99,24 @@ pub fn task_weights(
     fit_weights(basis, &task_trajectory(robot, &joints, reference))
 }
 
+/// The task-space weights of each demonstration given by its joint-space
+/// weights, quaternions continuous from `reference`; errors name the
+/// demonstration.
+pub fn task_weight_set(
+    basis: &Basis,
+    robot: &Robot,
+    demos: &[&[f64]],
+    reference: &UnitQuaternion<f64>,
+) -> Result<Vec<DVector<f64>>> {
+    demos
+        .iter()
+        .enumerate()
+        .map(|(k, w)| {
+            task_weights(basis, robot, w, reference).map_err(|e| e.within(&format!("demos[{k}]")))
+        })
+        .collect()
+}
+
 /// The task-space weight distribution of demonstrations given by their
 /// joint-space weights (at least two), quaternions continuous from
 /// `reference`.
@@ -108,13 +126,7 @@ pub fn task_distribution(
     demos: &[&[f64]],
     reference: &UnitQuaternion<f64>,
 ) -> Result<WeightDistribution> {
-    let weights = demos
-        .iter()
-        .enumerate()
-        .map(|(k, w)| {
-            task_weights(basis, robot, w, reference).map_err(|e| e.within(&format!("demos[{k}]")))
-        })
-        .collect::<Result<Vec<_>>>()?;
+    let weights = task_weight_set(basis, robot, demos, reference)?;
     WeightDistribution::from_demonstrations(&weights, TASK_DIMS, basis.n_basis())
 }
 
