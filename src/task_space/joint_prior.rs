@@ -384,7 +384,7 @@ fn reach(
         if errors.1 < options.tolerance_m && errors.2 < options.tolerance_rad {
             break;
         }
-        let mut dq = damped_pseudo_inverse(robot, q, w, options.damping) * &errors.0;
+        let mut dq = damped_pseudo_inverse(robot, q, w, options.damping) * errors.0;
         let largest = dq.amax();
         if largest > options.max_step_rad {
             dq *= options.max_step_rad / largest;
