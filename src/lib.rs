@@ -44,6 +44,9 @@
 //! - [`optim`] — the Mahalanobis-closest trajectory optimiser: a typed prior
 //!   beside an [`optim::Task`].
 //! - [`service`] — the axum HTTP service, a shell over [`plan`] and [`optim`].
+//! - `ros2` (cargo feature `ros2`) — the same planning as a native ROS 2
+//!   node: camera, joint-state and target topics in, a `JointTrajectory` and
+//!   diagnostics out.
 //!
 //! **The offline tools** — data, training, benchmarks, pictures:
 //!
@@ -83,6 +86,8 @@ pub mod plot;
 pub mod progress;
 pub mod promp;
 pub mod robot;
+#[cfg(feature = "ros2")]
+pub mod ros2;
 pub mod scene;
 pub mod service;
 pub mod strict_json;

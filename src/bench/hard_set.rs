@@ -114,7 +114,11 @@ pub fn make_hard_one(
     label: bool,
 ) -> Result<ProblemFile> {
     let robot = generator.robot();
-    let family = if i % 2 == 0 { "synth" } else { "example" };
+    let family = if i.is_multiple_of(2) {
+        "synth"
+    } else {
+        "example"
+    };
     let intruders = 1 + (i / 2) % 3;
     for attempt in 0..ATTEMPTS {
         let mut rng = ChaCha8Rng::seed_from_u64(seed.wrapping_mul(6151).wrapping_add(attempt));

@@ -284,7 +284,7 @@ fn prior_for(
 ) -> (WeightDistribution, Vec<DVector<f64>>, String) {
     let demos = target.demo_weights.clone();
     let n = demos.len();
-    if category == "degenerate-prior" && i % 2 == 0 {
+    if category == "degenerate-prior" && i.is_multiple_of(2) {
         let few = demos[..3.min(n)].to_vec();
         let d = &target.distribution;
         if let Ok(dist) = WeightDistribution::from_demonstrations(&few, d.n_joints, d.n_basis) {
@@ -454,7 +454,7 @@ fn infeasible(
     rng: &mut ChaCha8Rng,
 ) -> (Obstacle, &'static str) {
     let radius = rng.gen_range(0.03..0.045);
-    if i % 2 == 0 {
+    if i.is_multiple_of(2) {
         let tcp = robot.tcp_pose(&path.start).translation.vector;
         (
             sphere("bench-berry-on-start".into(), tcp, radius),

@@ -21,6 +21,7 @@ pub mod prior;
 pub mod promp_args;
 pub mod robot;
 pub mod robot_args;
+pub mod ros2;
 pub mod serve;
 pub mod train;
 
@@ -59,6 +60,8 @@ pub enum Command {
     Plan(plan::PlanArgs),
     /// Run the HTTP service.
     Serve(serve::ServeArgs),
+    /// Run the planner as a ROS 2 node (built with `--features ros2`).
+    Ros2(ros2::Ros2Args),
     /// Run offline benchmarks.
     Bench(bench::BenchArgs),
 }
@@ -101,6 +104,7 @@ pub fn run(command: Command) -> crate::Result<()> {
         Command::Eval(a) => eval::run(a),
         Command::Plan(a) => plan::run(a),
         Command::Serve(a) => serve::run(a),
+        Command::Ros2(a) => ros2::run(a),
         Command::Bench(a) => bench::run(a),
     }
 }

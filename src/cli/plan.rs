@@ -231,6 +231,7 @@ fn flag_parts(args: &PlanArgs) -> Result<PlanParts> {
         goal_standoff_m: args.goal_standoff,
         approach: approach(args)?,
         camera,
+        camera_pose: None,
         world: world(args)?,
         task,
     })

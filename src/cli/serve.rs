@@ -202,7 +202,7 @@ fn load_token(file: Option<&std::path::Path>) -> Result<Option<Token>> {
 }
 
 /// Structured logs to stderr; `RUST_LOG` filters (default `info`).
-fn init_logging(json: bool) {
+pub(crate) fn init_logging(json: bool) {
     use tracing_subscriber::EnvFilter;
     let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
     let builder = tracing_subscriber::fmt()

@@ -427,7 +427,7 @@ impl ModelConfig {
             check_range(&format!("head_hidden[{i}]"), h, 1, 4096)?;
         }
         let side = self.preprocess.input_size;
-        if side % (1 << self.encoder_channels.len()) != 0 || self.encoded_side() == 0 {
+        if !side.is_multiple_of(1 << self.encoder_channels.len()) || self.encoded_side() == 0 {
             return Err(Error::invalid(
                 "preprocess.input_size",
                 format!(

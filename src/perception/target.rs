@@ -214,7 +214,7 @@ mod tests {
         // A leaf 4 cm in front over the left third of the box, every 5th
         // pixel without a return, the background 0.4 m behind.
         let spoil = |x: u32, y: u32, b: &[f64; 4], z: f64| {
-            if (x + 3 * y) % 5 == 0 {
+            if (x + 3 * y).is_multiple_of(5) {
                 0.0
             } else if (x as f64) < b[0] + (b[2] - b[0]) / 3.0 && (y as f64) > b[1] {
                 0.46

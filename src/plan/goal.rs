@@ -6,7 +6,7 @@
 
 use super::request::TargetInput;
 use crate::optim::{Goal, GoalApproach};
-use crate::perception::{locate_target, Camera, CameraModel};
+use crate::perception::{locate_target, Camera};
 use crate::promp::{Basis, FinalPointObservation, WeightDistribution};
 use crate::robot::Robot;
 use crate::{Error, Result};
@@ -98,15 +98,13 @@ pub(super) struct Located {
 
 /// The berry centre, if the input has one.
 pub(super) fn locate(
-    camera: &CameraModel,
-    robot: &Robot,
+    camera: &Camera,
     target: &TargetInput,
     target_box: &[f64; 4],
 ) -> Result<Option<Located>> {
     if let TargetInput::None = target {
         return Ok(None);
     }
-    let camera = Camera::at_home(camera, robot)?;
     match target {
         TargetInput::None => Ok(None),
         TargetInput::Position(p) => Ok(Some(Located {
@@ -116,7 +114,7 @@ pub(super) fn locate(
             source: TargetSource::Client,
         })),
         TargetInput::Depth(depth, field) => {
-            let t = locate_target(depth, target_box, &camera, field)?;
+            let t = locate_target(depth, target_box, camera, field)?;
             Ok(Some(Located {
                 position: t.position,
                 depth_m: Some(t.depth_m),

@@ -107,13 +107,21 @@ pub fn predict_and_optimize(
         goal_standoff_m,
         approach,
         camera,
+        camera_pose,
         world: source,
         world_field,
         mut task,
         ..
     } = request;
     let camera = camera.unwrap_or_else(|| model.config().camera_model());
-    let located = locate(&camera, robot, &target, &target_box)?;
+    let posed = match camera_pose {
+        Some(pose) => crate::perception::Camera {
+            intrinsics: camera.intrinsics,
+            pose,
+        },
+        None => crate::perception::Camera::at_home(&camera, robot)?,
+    };
+    let located = locate(&posed, &target, &target_box)?;
     let depth_m = located.as_ref().map(|l| l.camera_depth_m);
     let world = match (source, &located) {
         (WorldSource::Depth, Some(l)) => {
@@ -128,7 +136,6 @@ pub fn predict_and_optimize(
                 center: l.position,
                 depth_m: l.camera_depth_m,
             };
-            let posed = crate::perception::Camera::at_home(&camera, robot)?;
             let (sensed, report) = world::sensed_world(depth, &posed, &keep, &world_field)?;
             task.obstacles.extend(sensed);
             Some(report)

@@ -10,6 +10,7 @@ use crate::optim::{GoalApproach, Task};
 use crate::perception::{CameraModel, DepthImage};
 use crate::{Error, Result};
 use image::DynamicImage;
+use nalgebra::Isometry3;
 
 /// Where the 3-D target comes from.
 #[derive(Clone, Debug, Default)]
@@ -120,6 +121,9 @@ pub struct PlanParts {
     pub approach: Option<GoalApproach>,
     /// The camera that took the images, when not the model's.
     pub camera: Option<CameraModel>,
+    /// The camera's optical frame in the robot's base frame, when the
+    /// images were not taken by the hand camera at the home configuration.
+    pub camera_pose: Option<Isometry3<f64>>,
     /// Where the world comes from besides the posted obstacles.
     pub world: WorldSource,
     /// What to plan besides the prior (scene, limits, start, goal, options).
@@ -141,6 +145,7 @@ impl PlanParts {
             goal_standoff_m: None,
             approach: None,
             camera: None,
+            camera_pose: None,
             world: WorldSource::None,
             task,
         }
@@ -158,6 +163,7 @@ pub struct PlanRequest {
     pub(super) goal_standoff_m: Option<f64>,
     pub(super) approach: Option<GoalApproach>,
     pub(super) camera: Option<CameraModel>,
+    pub(super) camera_pose: Option<Isometry3<f64>>,
     pub(super) world: WorldSource,
     pub(super) world_field: String,
     pub(super) task: Task,
@@ -244,6 +250,7 @@ impl PlanRequest {
             goal_standoff_m: parts.goal_standoff_m,
             approach: parts.approach,
             camera: parts.camera,
+            camera_pose: parts.camera_pose,
             world: parts.world,
             world_field: fields.world.clone(),
             task: parts.task,

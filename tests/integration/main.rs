@@ -44,6 +44,10 @@ mod robot_hull_query;
 mod robot_ik;
 mod robot_kinematics;
 mod robot_urdf_mesh;
+#[cfg(feature = "ros2")]
+mod ros2_cdr;
+#[cfg(feature = "ros2")]
+mod ros2_node;
 mod scene_clearance;
 mod scene_obstacles;
 mod scene_points;

@@ -59,7 +59,7 @@ pub fn thin_in_time<K: Ord + Copy>(candidates: &[Candidate<K>]) -> Vec<usize> {
             let before = score_at(e.checked_sub(1).and_then(|k| group.get(k)));
             let after = score_at(group.get(e + 1));
             let maximum = c.score >= before && c.score >= after;
-            if maximum || (run - 1) % RUN_STRIDE == 0 {
+            if maximum || (run - 1).is_multiple_of(RUN_STRIDE) {
                 keep.push(i);
             }
         }

@@ -306,6 +306,7 @@ fn finish_input(
         goal_standoff_m,
         approach,
         camera,
+        camera_pose: None,
         world,
         task,
     };
