@@ -60,8 +60,10 @@ pub enum Command {
     Plan(plan::PlanArgs),
     /// Run the HTTP service.
     Serve(serve::ServeArgs),
-    /// Run the planner as a ROS 2 node (built with `--features ros2`).
-    Ros2(ros2::Ros2Args),
+    /// The planner as a ROS 2 node, and a stand-in cell to drive one
+    /// (built with `--features ros2`).
+    #[command(subcommand)]
+    Ros2(ros2::Ros2Command),
     /// Run offline benchmarks.
     Bench(bench::BenchArgs),
 }
@@ -104,7 +106,7 @@ pub fn run(command: Command) -> crate::Result<()> {
         Command::Eval(a) => eval::run(a),
         Command::Plan(a) => plan::run(a),
         Command::Serve(a) => serve::run(a),
-        Command::Ros2(a) => ros2::run(a),
+        Command::Ros2(c) => ros2::run(c),
         Command::Bench(a) => bench::run(a),
     }
 }

@@ -1,19 +1,32 @@
-//! `dpmp ros2`: run the planner as a ROS 2 node (see `dpmp::ros2`, cargo
-//! feature `ros2`).
+//! `dpmp ros2`: the planner as a ROS 2 node, and a stand-in cell to drive
+//! one (see `dpmp::ros2`, cargo feature `ros2`).
 //!
 //! ```text
-//! dpmp ros2 [--params-file FILE] [--node-name dpmp] [--namespace NS]
-//!           [--domain-id N] [--remap FROM:=TO]... [--model DIR]
-//!           [--robot URDF --base LINK --tip LINK] [--log-json]
+//! dpmp ros2 node   [--params-file FILE] [--node-name dpmp] [--namespace NS]
+//!                  [--domain-id N] [--remap FROM:=TO]... [--model DIR] [--log-json]
+//! dpmp ros2 replay [the same] [--targets 20] [--seed 7] [--with-node]
 //! ```
-//! Stops on SIGINT or SIGTERM, with its counts in the log.
+//! `node` stops on SIGINT or SIGTERM, with its counts in the log. `replay`
+//! publishes generated plants as a hand camera and a robot would, sends
+//! each target, and prints what the node answered and how fast.
 
 use crate::Result;
+use clap::Subcommand;
 use std::path::PathBuf;
 
-/// Arguments of `dpmp ros2`.
+/// `dpmp ros2` subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Ros2Command {
+    /// Run the node until SIGINT or SIGTERM.
+    Node(NodeArgs),
+    /// Drive a node with generated plants and print its answers and
+    /// latencies (no camera or robot needed).
+    Replay(ReplayArgs),
+}
+
+/// Which node, and how it is configured (ROS-style).
 #[derive(Debug, clap::Args)]
-pub struct Ros2Args {
+pub struct NodeArgs {
     /// A ROS 2 parameters file (`<node>: ros__parameters: ...`): topics,
     /// QoS, matching rules, what to plan (docs/design.md, "ROS 2 node").
     #[arg(long)]
@@ -42,61 +55,218 @@ pub struct Ros2Args {
     pub log_json: bool,
 }
 
-/// Run `dpmp ros2` until SIGINT or SIGTERM.
-#[cfg(feature = "ros2")]
-pub fn run(args: Ros2Args) -> Result<()> {
-    use crate::ros2::NodeSettings;
-    use std::sync::Arc;
-    super::serve::init_logging(args.log_json);
-    let mut settings = match &args.params_file {
-        Some(path) => NodeSettings::from_params_file(path, &args.node_name)?,
-        None => NodeSettings {
-            node_name: args.node_name.clone(),
-            ..NodeSettings::default()
-        },
-    };
-    if let Some(ns) = &args.namespace {
-        settings.namespace = ns.clone();
-    }
-    if let Some(domain) = args.domain_id {
-        settings.domain_id = domain;
-    }
-    for rule in &args.remaps {
-        settings.remap(rule)?;
-    }
-    settings.validate().map_err(super::as_flag_error)?;
-    let robot = Arc::new(args.robot.load()?);
-    let model = Arc::new(crate::net::Model::load_or_shipped(args.model.as_deref())?);
-    tracing::info!(model = model.name(), "model loaded");
-    let node = crate::ros2::spawn(settings, model, robot)?;
-    wait_for_signal()?;
-    let counters = node.stop()?;
-    tracing::info!(?counters, "stopped");
-    Ok(())
+/// Arguments of `dpmp ros2 replay`.
+#[derive(Debug, clap::Args)]
+pub struct ReplayArgs {
+    /// The node to drive (its parameters give the topics and the domain).
+    #[command(flatten)]
+    pub node: NodeArgs,
+    /// Targets to send (one generated plant each).
+    #[arg(long, default_value_t = 20)]
+    pub targets: usize,
+    /// Seed of the generated plants.
+    #[arg(long, default_value_t = 7)]
+    pub seed: u64,
+    /// Start the node in this process first (else one must be running).
+    #[arg(long)]
+    pub with_node: bool,
 }
 
-/// Without the feature: say how to get it.
+/// Run `dpmp ros2 ...`.
+pub fn run(command: Ros2Command) -> Result<()> {
+    match command {
+        Ros2Command::Node(args) => node(args),
+        Ros2Command::Replay(args) => replay(args),
+    }
+}
+
 #[cfg(not(feature = "ros2"))]
-pub fn run(_args: Ros2Args) -> Result<()> {
+fn without_the_feature() -> Result<()> {
     Err(crate::Error::invalid(
         "ros2",
         "this dpmp was built without the ROS 2 node: build it with `cargo build --release --features ros2`",
     ))
 }
 
-/// Block until SIGINT or SIGTERM.
+#[cfg(not(feature = "ros2"))]
+fn node(_: NodeArgs) -> Result<()> {
+    without_the_feature()
+}
+
+#[cfg(not(feature = "ros2"))]
+fn replay(_: ReplayArgs) -> Result<()> {
+    without_the_feature()
+}
+
 #[cfg(feature = "ros2")]
-fn wait_for_signal() -> Result<()> {
-    let runtime = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .map_err(|e| crate::Error::Numerical(format!("cannot start a runtime: {e}")))?;
-    runtime.block_on(async {
+use with_ros2::{node, replay};
+
+#[cfg(feature = "ros2")]
+mod with_ros2 {
+    use super::{NodeArgs, ReplayArgs};
+    use crate::bench::report::Percentiles;
+    use crate::net::Model;
+    use crate::robot::Robot;
+    use crate::ros2::msg::{DiagnosticStatus, Time};
+    use crate::ros2::replay::{Answer, Cell, Frame};
+    use crate::ros2::NodeSettings;
+    use crate::synth::generate::Generator;
+    use crate::synth::settings::SynthSettings;
+    use crate::{Error, Result};
+    use std::sync::Arc;
+    use std::time::Duration;
+
+    /// The settings the flags say.
+    fn settings(args: &NodeArgs) -> Result<NodeSettings> {
+        let mut settings = match &args.params_file {
+            Some(path) => NodeSettings::from_params_file(path, &args.node_name)?,
+            None => NodeSettings {
+                node_name: args.node_name.clone(),
+                ..NodeSettings::default()
+            },
+        };
+        if let Some(ns) = &args.namespace {
+            settings.namespace = ns.clone();
+        }
+        if let Some(domain) = args.domain_id {
+            settings.domain_id = domain;
+        }
+        for rule in &args.remaps {
+            settings.remap(rule)?;
+        }
+        settings.validate().map_err(crate::cli::as_flag_error)?;
+        Ok(settings)
+    }
+
+    fn model_and_robot(args: &NodeArgs) -> Result<(Arc<Model>, Arc<Robot>)> {
+        let robot = Arc::new(args.robot.load()?);
+        let model = Arc::new(Model::load_or_shipped(args.model.as_deref())?);
+        tracing::info!(model = model.name(), "model loaded");
+        Ok((model, robot))
+    }
+
+    /// `dpmp ros2 node`.
+    pub fn node(args: NodeArgs) -> Result<()> {
+        crate::cli::serve::init_logging(args.log_json);
+        let settings = settings(&args)?;
+        let (model, robot) = model_and_robot(&args)?;
+        let node = crate::ros2::spawn(settings, model, robot)?;
+        runtime()?.block_on(wait_for_signal())?;
+        let counters = node.stop()?;
+        tracing::info!(?counters, "stopped");
+        Ok(())
+    }
+
+    /// `dpmp ros2 replay`.
+    pub fn replay(args: ReplayArgs) -> Result<()> {
+        if !(1..=10_000).contains(&args.targets) {
+            return Err(Error::invalid("--targets", "must be in 1..=10000"));
+        }
+        crate::cli::serve::init_logging(args.node.log_json);
+        let settings = settings(&args.node)?;
+        let (model, robot) = model_and_robot(&args.node)?;
+        let frames = frames(&model, &robot, args.targets, args.seed)?;
+        let _node = match args.with_node {
+            true => Some(crate::ros2::spawn(settings.clone(), model, robot)?),
+            false => None,
+        };
+        let timeout = settings.deadline() + Duration::from_secs(30);
+        let answers = runtime()?.block_on(async {
+            let mut cell = Cell::new(&settings)?;
+            cell.wait_for_node(Duration::from_secs(30)).await?;
+            let bar = crate::progress::bar(true, frames.len() as u64, "targets");
+            let mut answers = Vec::with_capacity(frames.len());
+            for (i, frame) in frames.iter().enumerate() {
+                let stamp = Time {
+                    sec: i as i32 + 1,
+                    nanosec: 0,
+                };
+                cell.sensors(frame, (stamp, stamp), Duration::from_millis(100))
+                    .await?;
+                answers.push(cell.request(frame.roi, timeout).await?);
+                bar.inc(1);
+            }
+            bar.finish_and_clear();
+            cell.close().await;
+            Ok::<_, Error>(answers)
+        })?;
+        crate::cli::write_stdout(&summary(&answers))
+    }
+
+    /// One generated plant per target, the robot at home.
+    fn frames(model: &Model, robot: &Robot, targets: usize, seed: u64) -> Result<Vec<Frame>> {
+        let generator = Generator::new(SynthSettings::new(targets, 1), robot.clone())?;
+        let camera = model.config().camera_model();
+        let bar = crate::progress::bar(true, targets as u64, "plants");
+        let frames = (0..targets)
+            .map(|i| {
+                let out = generator.config(seed, i)?;
+                bar.inc(1);
+                let depth = out.depths[0]
+                    .as_ref()
+                    .ok_or_else(|| Error::Numerical("the generator made no depth image".into()))?;
+                Frame::new(
+                    &out.images[0],
+                    depth,
+                    &camera,
+                    out.records[0].bbox,
+                    robot.joint_names(),
+                    &robot.home(),
+                )
+            })
+            .collect();
+        bar.finish_and_clear();
+        frames
+    }
+
+    /// The answers in a few lines: counts, then latencies.
+    fn summary(answers: &[Answer]) -> String {
+        let count = |level| answers.iter().filter(|a| a.status.level == level).count();
+        let column =
+            |key: &str| -> Vec<f64> { answers.iter().filter_map(|a| a.value(key)).collect() };
+        let (latency, plan) = (column("target_to_publish_ms"), column("plan_ms"));
+        let overhead: Vec<f64> = answers
+            .iter()
+            .filter_map(|a| Some(a.value("target_to_publish_ms")? - a.value("plan_ms")?))
+            .collect();
+        let round_trip: Vec<f64> = answers.iter().map(|a| a.round_trip_s * 1e3).collect();
+        let mut out = format!(
+            "targets {}: optimal {}, not optimal {}, refused {}\n\
+             | ms | p50 | p95 | max |\n|---|---|---|---|\n",
+            answers.len(),
+            count(DiagnosticStatus::OK),
+            count(DiagnosticStatus::WARN),
+            count(DiagnosticStatus::ERROR),
+        );
+        for (name, values) in [
+            ("target received → trajectory published", &latency),
+            ("plan (messages → answer)", &plan),
+            ("difference (the node's own time)", &overhead),
+            ("target sent → diagnostics received", &round_trip),
+        ] {
+            let p = Percentiles::of(values);
+            out.push_str(&format!(
+                "| {name} | {:.2} | {:.2} | {:.2} |\n",
+                p.p50, p.p95, p.max
+            ));
+        }
+        out
+    }
+
+    fn runtime() -> Result<tokio::runtime::Runtime> {
+        tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .map_err(|e| Error::Numerical(format!("cannot start a runtime: {e}")))
+    }
+
+    /// Until SIGINT or SIGTERM.
+    async fn wait_for_signal() -> Result<()> {
         #[cfg(unix)]
         {
             use tokio::signal::unix::{signal, SignalKind};
             let mut term = signal(SignalKind::terminate())
-                .map_err(|e| crate::Error::Numerical(format!("cannot wait for SIGTERM: {e}")))?;
+                .map_err(|e| Error::Numerical(format!("cannot wait for SIGTERM: {e}")))?;
             tokio::select! {
                 _ = tokio::signal::ctrl_c() => {}
                 _ = term.recv() => {}
@@ -105,5 +275,5 @@ fn wait_for_signal() -> Result<()> {
         #[cfg(not(unix))]
         let _ = tokio::signal::ctrl_c().await;
         Ok(())
-    })
+    }
 }

@@ -27,6 +27,7 @@ pub mod msg;
 pub mod names;
 pub mod node;
 pub mod plan;
+pub mod replay;
 
 pub use config::NodeSettings;
 pub use node::{run, spawn, Counters, RunningNode};

@@ -391,7 +391,7 @@ async fn serve(
         )
         .map_err(|e| dds("node", e))?;
     let spinner = node.spinner().map_err(|e| dds("spinner", e))?;
-    tokio::spawn(async move {
+    let spinning = tokio::spawn(async move {
         if let Err(e) = spinner.spin().await {
             tracing::error!(error = ?e, "the ROS 2 spinner stopped");
         }
@@ -532,6 +532,10 @@ async fn serve(
     if let Some(handle) = in_flight {
         let _ = handle.await;
     }
+    // Dropping the node stops its spinner; its readers go before the
+    // participant (the context, dropped last).
+    drop(node);
+    let _ = spinning.await;
     tracing::info!(counters = ?state.counters, "dpmp ROS 2 node stopped");
     Ok(state.counters)
 }

@@ -1,13 +1,14 @@
-//! The ROS 2 node on loopback (feature `ros2`): a test node publishes a
-//! generated dataset record as ROS 2 messages (colour, aligned depth,
-//! camera info, joint state, target box); the dPMP node answers with a
-//! `JointTrajectory` equal to `/v1/plan`'s for the same inputs (1e-9)
-//! within the plan's time budget. Malformed messages (wrong encoding,
-//! undecodable bytes, NaN and unknown joints, a size mismatch) are refused
-//! with a diagnostics message naming the field, and the node goes on to
-//! plan the next good target the same way.
+//! The ROS 2 node on loopback (feature `ros2`): a stand-in cell
+//! ([`dpmp::ros2::replay::Cell`]) publishes a generated dataset record as
+//! ROS 2 messages (colour, aligned depth, camera info, joint state, target
+//! box); the dPMP node answers with a `JointTrajectory` equal to
+//! `/v1/plan`'s for the same inputs (1e-9) within the plan's time budget.
+//! Malformed messages (wrong encoding, undecodable bytes, NaN and unknown
+//! joints, a size mismatch, unpaired stamps) are refused with a
+//! diagnostics message naming the field, and the node goes on to plan the
+//! next good target the same way.
 //!
-//! Both nodes run in this process on their own DDS domain (RustDDS:
+//! Both nodes run in this process on a DDS domain of their own (RustDDS:
 //! UDP on loopback, no ROS install).
 
 use crate::common::http::{client, post_json, start_with_default_model};
@@ -16,287 +17,80 @@ use dpmp::net::Model;
 use dpmp::optim::report::RosDuration;
 use dpmp::robot::Robot;
 use dpmp::ros2::config::Reliability;
-use dpmp::ros2::msg::{
-    CameraInfo, DiagnosticArray, DiagnosticStatus, Header, Image, JointState, JointTrajectory,
-    RegionOfInterest, Time,
-};
+use dpmp::ros2::msg::{DiagnosticStatus, JointTrajectory, Time};
+use dpmp::ros2::replay::{Cell, Frame};
 use dpmp::ros2::NodeSettings;
+use dpmp::synth::dataset::TargetRecord;
 use dpmp::synth::generate::Generator;
 use dpmp::synth::settings::SynthSettings;
-use futures::StreamExt;
-use ros2_client::qos::{History, WhenFull};
-use ros2_client::{
-    Context, ContextOptions, MessageTypeName, Name, Node, NodeName, NodeOptions, Publisher,
-    QosProfile, Subscription,
-};
-use serde::Serialize;
+use ros2_client::{MessageTypeName, Name, Publisher};
 use serde_json::{json, Value};
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// The plan's time budget in this test (debug build, loaded machine).
 const DEADLINE_S: f64 = 60.0;
+
+/// Time for the node to take in what the cell published.
+const SETTLE: Duration = Duration::from_millis(300);
 
 /// A domain of this test's own, away from ROS's default 0.
 fn domain() -> u16 {
     100 + (std::process::id() % 100) as u16
 }
 
-fn reliable() -> QosProfile {
-    QosProfile::subscription_default()
-        .reliability_reliable(WhenFull::DEFAULT)
-        .history(History::KeepLast { depth: 10 })
-}
-
-/// A generated plant: colour, aligned depth (mm) and the record.
+/// A generated plant: its record, its images as messages and as PNGs.
 struct Scene {
-    color: Image,
-    depth: Image,
-    roi: RegionOfInterest,
-    record: dpmp::synth::dataset::TargetRecord,
-    rgb: image::RgbImage,
+    record: TargetRecord,
+    frame: Frame,
+    png: Vec<u8>,
     depth_png: Vec<u8>,
 }
 
-fn scene() -> Scene {
-    let generator = Generator::new(SynthSettings::new(1, 1), Robot::panda().unwrap()).unwrap();
-    let out = generator.config(21, 0).unwrap();
-    let rgb = out.images[0].clone();
-    let depth = out.depths[0].clone().unwrap();
-    assert_eq!(depth.scale_m(), 0.001);
-    let (w, h) = (rgb.width(), rgb.height());
-    let record = out.records[0].clone();
-    let b = record.bbox;
-    let roi = RegionOfInterest {
-        x_offset: b[0].floor() as u32,
-        y_offset: b[1].floor() as u32,
-        width: (b[2].ceil() - b[0].floor()) as u32,
-        height: (b[3].ceil() - b[1].floor()) as u32,
-        do_rectify: false,
-    };
-    Scene {
-        color: Image {
-            header: Header::default(),
-            height: h,
-            width: w,
-            encoding: "rgb8".into(),
-            is_bigendian: 0,
-            step: 3 * w,
-            data: rgb.as_raw().clone(),
-        },
-        depth: Image {
-            header: Header::default(),
-            height: h,
-            width: w,
-            encoding: "16UC1".into(),
-            is_bigendian: 0,
-            step: 2 * w,
-            data: depth.units().iter().flat_map(|u| u.to_le_bytes()).collect(),
-        },
-        roi,
-        record,
-        rgb,
-        depth_png: depth.encode_png().unwrap(),
-    }
-}
-
-fn camera_info(model: &Model) -> CameraInfo {
-    let i = model.config().camera_model().intrinsics;
-    CameraInfo {
-        width: i.width,
-        height: i.height,
-        distortion_model: "plumb_bob".into(),
-        d: vec![0.0; 5],
-        k: [i.fx, 0.0, i.cx, 0.0, i.fy, i.cy, 0.0, 0.0, 1.0],
-        r: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
-        p: [
-            i.fx, 0.0, i.cx, 0.0, 0.0, i.fy, i.cy, 0.0, 0.0, 0.0, 1.0, 0.0,
-        ],
-        ..CameraInfo::default()
-    }
-}
-
-/// A start a little off home, with the gripper's fingers and the joints
-/// in another order than the robot's.
-fn joint_state(robot: &Robot) -> (JointState, Vec<f64>) {
-    let start: Vec<f64> = robot
+/// A start a little off home, with the joints in reverse order and a
+/// gripper finger among them.
+fn off_home(robot: &Robot) -> Vec<f64> {
+    robot
         .home()
         .iter()
         .enumerate()
         .map(|(i, q)| q + 0.01 * (i as f64 - 3.0))
-        .collect();
-    let mut name: Vec<String> = robot.joint_names().iter().rev().cloned().collect();
-    let mut position: Vec<f64> = start.iter().rev().copied().collect();
-    name.push("panda_finger_joint1".into());
-    position.push(0.04);
-    (
-        JointState {
-            name,
-            position,
-            ..JointState::default()
-        },
-        start,
+        .collect()
+}
+
+fn scene(robot: &Robot, model: &Model) -> Scene {
+    let generator = Generator::new(SynthSettings::new(1, 1), robot.clone()).unwrap();
+    let out = generator.config(21, 0).unwrap();
+    let depth = out.depths[0].clone().unwrap();
+    let record = out.records[0].clone();
+    let start = off_home(robot);
+    let mut frame = Frame::new(
+        &out.images[0],
+        &depth,
+        &model.config().camera_model(),
+        record.bbox,
+        robot.joint_names(),
+        &start,
     )
-}
-
-/// The test node: the camera, the robot and the picker.
-struct Cell {
-    node: Node,
-    color: Publisher<Image>,
-    depth: Publisher<Image>,
-    info: Publisher<CameraInfo>,
-    joints: Publisher<JointState>,
-    target: Publisher<RegionOfInterest>,
-    trajectory: Subscription<JointTrajectory>,
-    diagnostics: Subscription<DiagnosticArray>,
-    /// One byte, on the colour topic: not an Image.
-    garbage: Publisher<u8>,
-    _context: Context,
-}
-
-fn topic(node: &Node, name: &str, ty: (&str, &str)) -> ros2_client::dds::rustdds::Topic {
-    node.create_topic(
-        &Name::parse(name).unwrap(),
-        MessageTypeName::new(ty.0, ty.1),
-        &reliable(),
-    )
-    .unwrap()
-}
-
-fn publisher<M: Serialize>(node: &mut Node, name: &str, ty: (&str, &str)) -> Publisher<M> {
-    let t = topic(node, name, ty);
-    node.create_publisher(&t, None).unwrap()
-}
-
-impl Cell {
-    fn new(t: &dpmp::ros2::config::Topics) -> Cell {
-        let context = Context::with_options(ContextOptions::new().domain_id(domain())).unwrap();
-        let mut node = context
-            .new_node(NodeName::new("/", "cell").unwrap(), NodeOptions::new())
-            .unwrap();
-        let image = ("sensor_msgs", "Image");
-        let color = publisher(&mut node, &t.color, image);
-        let depth = publisher(&mut node, &t.depth, image);
-        let info = publisher(&mut node, &t.camera_info, ("sensor_msgs", "CameraInfo"));
-        let joints = publisher(&mut node, &t.joint_states, ("sensor_msgs", "JointState"));
-        let target = publisher(&mut node, &t.target, ("sensor_msgs", "RegionOfInterest"));
-        let tt = topic(&node, &t.trajectory, ("trajectory_msgs", "JointTrajectory"));
-        let trajectory = node.create_subscription(&tt, None).unwrap();
-        let dt = topic(
-            &node,
-            &t.diagnostics,
-            ("diagnostic_msgs", "DiagnosticArray"),
-        );
-        let diagnostics = node.create_subscription(&dt, None).unwrap();
-        let garbage = publisher(&mut node, &t.color, image);
-        Cell {
-            node,
-            color,
-            depth,
-            info,
-            joints,
-            target,
-            trajectory,
-            diagnostics,
-            garbage,
-            _context: context,
-        }
-    }
-
-    /// Wait until the dPMP node has matched every topic.
-    async fn wait_for_the_node(&self) {
-        let all = async {
-            self.color.wait_for_subscription(&self.node).await;
-            self.depth.wait_for_subscription(&self.node).await;
-            self.info.wait_for_subscription(&self.node).await;
-            self.joints.wait_for_subscription(&self.node).await;
-            self.target.wait_for_subscription(&self.node).await;
-            self.trajectory.wait_for_publisher(&self.node).await;
-            self.diagnostics.wait_for_publisher(&self.node).await;
-        };
-        tokio::time::timeout(Duration::from_secs(30), all)
-            .await
-            .expect("the dPMP node matched the cell's topics within 30 s");
-        // The writers have matched the node's readers; give the readers the
-        // same moment to match the writers (discovery runs both ways).
-        tokio::time::sleep(Duration::from_millis(1500)).await;
-    }
-
-    /// Publish a colour and depth pair with one stamp, the camera info and
-    /// the joint state; give the node a moment to take them in.
-    async fn sensors(
-        &self,
-        color: &Image,
-        depth: &Image,
-        info: &CameraInfo,
-        joints: &JointState,
-        stamp: i32,
-    ) {
-        self.sensors_at(color, depth, info, joints, (stamp, stamp))
-            .await
-    }
-
-    /// [`Cell::sensors`] with a stamp for the colour and one for the depth
-    /// (half seconds).
-    async fn sensors_at(
-        &self,
-        color: &Image,
-        depth: &Image,
-        info: &CameraInfo,
-        joints: &JointState,
-        stamps: (i32, i32),
-    ) {
-        let stamped = |m: &Image, half_seconds: i32| Image {
-            header: Header {
-                stamp: RosDuration::from_seconds(0.5 * f64::from(half_seconds)).into(),
-                frame_id: "camera_color_optical_frame".into(),
-            },
-            ..m.clone()
-        };
-        self.info.publish(info.clone()).unwrap();
-        self.joints.publish(joints.clone()).unwrap();
-        self.color.publish(stamped(color, stamps.0)).unwrap();
-        self.depth.publish(stamped(depth, stamps.1)).unwrap();
-        tokio::time::sleep(Duration::from_millis(300)).await;
-    }
-
-    /// Send the target; the diagnostics that answer it and, when the plan
-    /// was `optimal`, the trajectory; with the time to the diagnostics.
-    async fn plan(
-        &self,
-        roi: RegionOfInterest,
-    ) -> (DiagnosticStatus, Option<JointTrajectory>, f64) {
-        let sent = Instant::now();
-        self.target.publish(roi).unwrap();
-        let diagnostics = self.diagnostics.async_stream();
-        futures::pin_mut!(diagnostics);
-        let (status, _) = tokio::time::timeout(
-            Duration::from_secs_f64(DEADLINE_S + 30.0),
-            diagnostics.next(),
-        )
-        .await
-        .expect("diagnostics within the deadline")
-        .unwrap()
+    .unwrap();
+    let js = &mut frame.joint_state;
+    js.name.reverse();
+    js.position.reverse();
+    js.name.push("panda_finger_joint1".into());
+    js.position.push(0.04);
+    let mut png = Vec::new();
+    image::DynamicImage::ImageRgb8(out.images[0].clone())
+        .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
         .unwrap();
-        let elapsed = sent.elapsed().as_secs_f64();
-        let status = status.status.into_iter().next().unwrap();
-        let trajectory = if status.level == DiagnosticStatus::OK {
-            let trajectories = self.trajectory.async_stream();
-            futures::pin_mut!(trajectories);
-            let (t, _) = tokio::time::timeout(Duration::from_secs(10), trajectories.next())
-                .await
-                .expect("the trajectory with its diagnostics")
-                .unwrap()
-                .unwrap();
-            Some(t)
-        } else {
-            None
-        };
-        (status, trajectory, elapsed)
+    Scene {
+        record,
+        frame,
+        png,
+        depth_png: depth.encode_png().unwrap(),
     }
 }
 
-fn settings(record: &dpmp::synth::dataset::TargetRecord) -> NodeSettings {
+fn settings(record: &TargetRecord) -> NodeSettings {
     let mut s = NodeSettings {
         namespace: "picker".into(),
         domain_id: domain(),
@@ -330,14 +124,10 @@ fn settings(record: &dpmp::synth::dataset::TargetRecord) -> NodeSettings {
 /// PNG in mm, the camera info's intrinsics, the joint state's start).
 fn http_plan(scene: &Scene, model: &Model, start: &[f64]) -> Value {
     let server = start_with_default_model();
-    let mut png = Vec::new();
-    image::DynamicImage::ImageRgb8(scene.rgb.clone())
-        .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
-        .unwrap();
     let b64 = |b: &[u8]| base64::engine::general_purpose::STANDARD.encode(b);
-    let r = scene.roi;
+    let r = scene.frame.roi;
     let body = json!({
-        "image_base64": b64(&png),
+        "image_base64": b64(&scene.png),
         "depth_base64": b64(&scene.depth_png),
         "target_box": [r.x_offset, r.y_offset, r.x_offset + r.width, r.y_offset + r.height],
         "mask_applied": true,
@@ -351,6 +141,12 @@ fn http_plan(scene: &Scene, model: &Model, start: &[f64]) -> Value {
     let (s, answer) = post_json(&client(), &server.url("/v1/plan"), body.to_string());
     assert_eq!(s, 200, "{answer}");
     answer
+}
+
+/// Colour and depth stamped `half_seconds` / 2 s apart from 0 (each its own).
+fn stamps(color: i32, depth: i32) -> (Time, Time) {
+    let t = |h: i32| RosDuration::from_seconds(0.5 * f64::from(h)).into();
+    (t(color), t(depth))
 }
 
 fn assert_same_trajectory(t: &JointTrajectory, http: &Value) {
@@ -386,82 +182,96 @@ fn the_node_plans_what_v1_plan_plans_and_survives_bad_messages() {
         .with_test_writer()
         .with_env_filter("dpmp=info")
         .try_init();
-    let scene = scene();
     let model = Model::shipped().unwrap();
     let robot = Robot::panda().unwrap();
+    let scene = scene(&robot, &model);
     let settings = settings(&scene.record);
-    let topics = settings.topics.clone();
-    let node =
-        dpmp::ros2::spawn(settings, Arc::new(model.clone()), Arc::new(robot.clone())).unwrap();
-    let http = http_plan(&scene, &model, &joint_state(&robot).1);
+    let node = dpmp::ros2::spawn(
+        settings.clone(),
+        Arc::new(model.clone()),
+        Arc::new(robot.clone()),
+    )
+    .unwrap();
+    let http = http_plan(&scene, &model, &off_home(&robot));
     assert_eq!(http["status"], "optimal", "{}", http["reason"]);
+    let timeout = Duration::from_secs_f64(DEADLINE_S + 30.0);
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
         .unwrap();
     runtime.block_on(async {
-        let cell = Cell::new(&topics);
-        cell.wait_for_the_node().await;
-        let info = camera_info(&model);
-        let (joints, _) = joint_state(&robot);
+        let mut cell = Cell::new(&settings).unwrap();
+        // One byte on the colour topic: not an Image.
+        let image = MessageTypeName::new("sensor_msgs", "Image");
+        let qos = ros2_client::QosProfile::subscription_default()
+            .reliability_reliable(ros2_client::qos::WhenFull::DEFAULT);
+        let garbage_topic = cell
+            .node_mut()
+            .create_topic(&Name::parse(&settings.topics.color).unwrap(), image, &qos)
+            .unwrap();
+        let garbage: Publisher<u8> = cell
+            .node_mut()
+            .create_publisher(&garbage_topic, None)
+            .unwrap();
+        cell.wait_for_node(Duration::from_secs(30)).await.unwrap();
+        let good = &scene.frame;
 
         // A good target: the trajectory /v1/plan gives, in the budget.
-        cell.sensors(&scene.color, &scene.depth, &info, &joints, 1)
-            .await;
-        let (status, trajectory, seconds) = cell.plan(scene.roi).await;
-        assert_eq!(status.level, DiagnosticStatus::OK, "{status:?}");
-        assert!(seconds <= DEADLINE_S, "{seconds} s");
-        assert_same_trajectory(&trajectory.unwrap(), &http);
-        let plan_ms = status.values.iter().find(|kv| kv.key == "plan_ms").unwrap();
-        assert!(plan_ms.value.parse::<f64>().unwrap() > 0.0);
+        cell.sensors(good, stamps(2, 2), SETTLE).await.unwrap();
+        let answer = cell.request(good.roi, timeout).await.unwrap();
+        assert_eq!(answer.status.level, DiagnosticStatus::OK, "{answer:?}");
+        assert!(answer.round_trip_s <= DEADLINE_S, "{answer:?}");
+        assert_same_trajectory(answer.trajectory.as_ref().unwrap(), &http);
+        assert!(answer.value("plan_ms").unwrap() > 0.0);
+        assert!(answer.value("target_to_publish_ms").unwrap() >= answer.value("plan_ms").unwrap());
 
         // Bad messages: each refused, naming what was wrong.
-        let mono = Image {
-            encoding: "mono8".into(),
-            ..scene.color.clone()
+        let with = |f: &dyn Fn(&mut Frame)| {
+            let mut frame = good.clone();
+            f(&mut frame);
+            frame
         };
-        let mut short = scene.depth.clone();
-        short.data.truncate(short.data.len() / 2);
-        let mut nan = joints.clone();
-        nan.position[2] = f64::NAN;
-        let mut unknown = joints.clone();
-        unknown.name[0] = "elbow".into();
-        for (stamp, color, depth, joints, field) in [
-            (2, &mono, &scene.depth, &joints, "color.encoding"),
-            (3, &scene.color, &short, &joints, "depth.data"),
-            (4, &scene.color, &scene.depth, &nan, "joint_states.position"),
-            (5, &scene.color, &scene.depth, &unknown, "joint_states.name"),
-        ] {
-            cell.sensors(color, depth, &info, joints, stamp).await;
-            let (status, trajectory, _) = cell.plan(scene.roi).await;
-            assert_eq!(status.level, DiagnosticStatus::ERROR, "{status:?}");
-            assert!(
-                status.message.contains(field),
-                "{field}: {}",
-                status.message
-            );
-            assert!(trajectory.is_none());
+        let cases = [
+            (
+                with(&|f| f.color.encoding = "mono8".into()),
+                "color.encoding",
+            ),
+            (with(&|f| f.depth.data.truncate(100)), "depth.data"),
+            (
+                with(&|f| f.joint_state.position[2] = f64::NAN),
+                "joint_states.position",
+            ),
+            (
+                with(&|f| f.joint_state.name[0] = "elbow".into()),
+                "joint_states.name",
+            ),
+        ];
+        for (i, (frame, field)) in cases.iter().enumerate() {
+            let t = 4 + 2 * i as i32;
+            cell.sensors(frame, stamps(t, t), SETTLE).await.unwrap();
+            let answer = cell.request(frame.roi, timeout).await.unwrap();
+            assert_eq!(answer.status.level, DiagnosticStatus::ERROR, "{answer:?}");
+            assert!(answer.status.message.contains(field), "{field}: {answer:?}");
+            assert!(answer.trajectory.is_none());
         }
         // A depth image 0.5 s away from the colour one does not pair.
-        cell.sensors_at(&scene.color, &scene.depth, &info, &joints, (6, 7))
-            .await;
-        let (status, _, _) = cell.plan(scene.roi).await;
-        assert_eq!(status.level, DiagnosticStatus::ERROR, "{status:?}");
+        cell.sensors(good, stamps(20, 21), SETTLE).await.unwrap();
+        let answer = cell.request(good.roi, timeout).await.unwrap();
+        assert_eq!(answer.status.level, DiagnosticStatus::ERROR, "{answer:?}");
         assert!(
-            status.message.contains("no depth image within"),
-            "{}",
-            status.message
+            answer.status.message.contains("no depth image within"),
+            "{answer:?}"
         );
-        // Bytes that are no Image at all on the colour topic.
-        cell.garbage.publish(7).unwrap();
-        tokio::time::sleep(Duration::from_millis(300)).await;
+        garbage.publish(7).unwrap();
+        tokio::time::sleep(SETTLE).await;
 
         // The node goes on: the good target plans the same trajectory.
-        cell.sensors(&scene.color, &scene.depth, &info, &joints, 8)
-            .await;
-        let (status, trajectory, _) = cell.plan(scene.roi).await;
-        assert_eq!(status.level, DiagnosticStatus::OK, "{status:?}");
-        assert_same_trajectory(&trajectory.unwrap(), &http);
+        cell.sensors(good, stamps(30, 30), SETTLE).await.unwrap();
+        let answer = cell.request(good.roi, timeout).await.unwrap();
+        assert_eq!(answer.status.level, DiagnosticStatus::OK, "{answer:?}");
+        assert_same_trajectory(answer.trajectory.as_ref().unwrap(), &http);
+        drop(garbage);
+        cell.close().await;
     });
     let counters = node.stop().unwrap();
     assert_eq!(counters.undecodable, 1, "{counters:?}");
