@@ -24,6 +24,7 @@
 use crate::optim::report::TrajectoryFormat;
 use crate::optim::{GoalApproach, Task};
 use crate::plan::WorldSource;
+use crate::service::ServiceConfig;
 use crate::{Error, Result};
 use serde::Deserialize;
 use std::path::Path;
@@ -193,7 +194,9 @@ pub struct NodeSettings {
 }
 
 impl Default for NodeSettings {
+    /// The topics' defaults, and the HTTP service's deadline and image limit.
     fn default() -> Self {
+        let service = ServiceConfig::default();
         NodeSettings {
             node_name: "dpmp".into(),
             namespace: String::new(),
@@ -202,8 +205,8 @@ impl Default for NodeSettings {
             qos: QosSettings::default(),
             stamp_tolerance_s: 0.02,
             max_input_age_s: 1.0,
-            deadline_s: 2.0,
-            max_image_pixels: 4096 * 4096,
+            deadline_s: service.deadline.as_secs_f64(),
+            max_image_pixels: service.max_image_pixels,
             plan: PlanSettings::default(),
             controller: ControllerSettings::default(),
         }
@@ -284,6 +287,28 @@ impl NodeSettings {
         }
         if self.max_image_pixels == 0 {
             return Err(Error::invalid("max_image_pixels", "must be positive"));
+        }
+        let service = ServiceConfig::default();
+        let task = &self.plan.task;
+        for (field, value, limit) in [
+            (
+                "plan.task.obstacles",
+                task.obstacles.len(),
+                service.max_obstacles,
+            ),
+            ("plan.task.samples", task.samples, service.max_samples),
+            (
+                "plan.task.promp.n_samples",
+                task.promp.n_samples,
+                service.max_trajectory_samples,
+            ),
+        ] {
+            if value > limit {
+                return Err(Error::invalid(
+                    field,
+                    format!("at most {limit} (the HTTP service's limit), got {value}"),
+                ));
+            }
         }
         if self.plan.task.start.is_some() {
             return Err(Error::invalid(

@@ -237,3 +237,119 @@ pub struct DiagnosticArray {
     /// One status per reported item.
     pub status: Vec<DiagnosticStatus>,
 }
+
+/// `geometry_msgs/Twist`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Twist {
+    /// Linear velocity.
+    pub linear: Vector3,
+    /// Angular velocity.
+    pub angular: Vector3,
+}
+
+/// `trajectory_msgs/MultiDOFJointTrajectoryPoint`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct MultiDofJointTrajectoryPoint {
+    /// Poses.
+    pub transforms: Vec<Transform>,
+    /// Velocities.
+    pub velocities: Vec<Twist>,
+    /// Accelerations.
+    pub accelerations: Vec<Twist>,
+    /// Time from the start of the motion.
+    pub time_from_start: Duration,
+}
+
+/// `trajectory_msgs/MultiDOFJointTrajectory` (empty in dPMP's goals).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct MultiDofJointTrajectory {
+    /// Stamp.
+    pub header: Header,
+    /// Joint names.
+    pub joint_names: Vec<String>,
+    /// Points.
+    pub points: Vec<MultiDofJointTrajectoryPoint>,
+}
+
+/// `control_msgs/JointTolerance` (0: the controller's default).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct JointTolerance {
+    /// Joint name.
+    pub name: String,
+    /// Position tolerance.
+    pub position: f64,
+    /// Velocity tolerance.
+    pub velocity: f64,
+    /// Acceleration tolerance.
+    pub acceleration: f64,
+}
+
+/// `control_msgs/JointComponentTolerance`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct JointComponentTolerance {
+    /// Joint name.
+    pub joint_name: String,
+    /// Which component (`X_AXIS = 1`, ...).
+    pub component: u16,
+    /// Position tolerance.
+    pub position: f64,
+    /// Velocity tolerance.
+    pub velocity: f64,
+    /// Acceleration tolerance.
+    pub acceleration: f64,
+}
+
+/// `control_msgs/action/FollowJointTrajectory`'s goal.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct FollowJointTrajectoryGoal {
+    /// The trajectory to follow: the published one.
+    pub trajectory: JointTrajectory,
+    /// Empty.
+    pub multi_dof_trajectory: MultiDofJointTrajectory,
+    /// Empty: the controller's defaults.
+    pub path_tolerance: Vec<JointTolerance>,
+    /// Empty.
+    pub component_path_tolerance: Vec<JointComponentTolerance>,
+    /// Empty: the controller's defaults.
+    pub goal_tolerance: Vec<JointTolerance>,
+    /// Empty.
+    pub component_goal_tolerance: Vec<JointComponentTolerance>,
+    /// Zero: the controller's default.
+    pub goal_time_tolerance: Duration,
+}
+
+/// `control_msgs/action/FollowJointTrajectory`'s result.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FollowJointTrajectoryResult {
+    /// 0 on success; negative codes for the failures.
+    pub error_code: i32,
+    /// Why, for people.
+    pub error_string: String,
+}
+
+/// `control_msgs/action/FollowJointTrajectory`'s feedback.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct FollowJointTrajectoryFeedback {
+    /// Stamp.
+    pub header: Header,
+    /// Joint names.
+    pub joint_names: Vec<String>,
+    /// Where the joints should be.
+    pub desired: JointTrajectoryPoint,
+    /// Where they are.
+    pub actual: JointTrajectoryPoint,
+    /// The difference.
+    pub error: JointTrajectoryPoint,
+    /// Multi-DOF joint names.
+    pub multi_dof_joint_names: Vec<String>,
+    /// Multi-DOF desired.
+    pub multi_dof_desired: MultiDofJointTrajectoryPoint,
+    /// Multi-DOF actual.
+    pub multi_dof_actual: MultiDofJointTrajectoryPoint,
+    /// Multi-DOF error.
+    pub multi_dof_error: MultiDofJointTrajectoryPoint,
+}
+
+impl ros2_client::Message for FollowJointTrajectoryGoal {}
+impl ros2_client::Message for FollowJointTrajectoryResult {}
+impl ros2_client::Message for FollowJointTrajectoryFeedback {}

@@ -13,7 +13,8 @@ use super::config::{NodeSettings, Reliability};
 use super::convert::{diagnostics, distortion_norm, trajectory_message};
 use super::inputs::{LatestInputs, MatchRules};
 use super::msg::{
-    CameraInfo, DiagnosticArray, DiagnosticStatus, Image, JointState, JointTrajectory,
+    CameraInfo, DiagnosticArray, DiagnosticStatus, FollowJointTrajectoryFeedback,
+    FollowJointTrajectoryGoal, FollowJointTrajectoryResult, Image, JointState, JointTrajectory,
     RegionOfInterest, TransformStamped,
 };
 use super::names::{node_name, topic_name};
@@ -25,10 +26,11 @@ use crate::plan::{predict_and_optimize, PlanResponse};
 use crate::robot::Robot;
 use crate::{Error, Result};
 use futures::{pin_mut, Stream, StreamExt};
+use ros2_client::action::ActionClientQosPolicies;
 use ros2_client::qos::History;
 use ros2_client::{
-    Context, ContextOptions, MessageInfo, MessageTypeName, Node, NodeOptions, Publisher,
-    QosProfile, Subscription,
+    ActionClient, ActionTypeName, Context, ContextOptions, MessageInfo, MessageTypeName, Node,
+    NodeOptions, Publisher, QosProfile, ServiceMapping, Subscription,
 };
 use serde::de::DeserializeOwned;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -52,6 +54,8 @@ pub struct Counters {
     pub optimal: u64,
     /// Trajectories published.
     pub published: u64,
+    /// Goals sent to the controller action (`optimal` answers only).
+    pub goals_sent: u64,
 }
 
 /// A node running on its own thread.
@@ -174,10 +178,81 @@ fn advertise<M: serde::Serialize>(
         .map_err(|e| dds(&format!("publisher {name}"), e))
 }
 
+/// The controller's `FollowJointTrajectory` action.
+type Controller = ActionClient<
+    FollowJointTrajectoryGoal,
+    FollowJointTrajectoryResult,
+    FollowJointTrajectoryFeedback,
+>;
+
+/// How long the controller has to accept or reject a goal.
+const GOAL_RESPONSE_TIMEOUT: Duration = Duration::from_secs(5);
+
 /// The node's publications.
 struct Outputs {
     trajectory: Publisher<JointTrajectory>,
     diagnostics: Publisher<DiagnosticArray>,
+    /// The controller action, when one is configured.
+    controller: Option<Arc<Controller>>,
+}
+
+/// The action client for `name`, with ROS 2's default action QoS
+/// (reliable services and feedback, a transient-local status topic).
+fn controller(node: &mut Node, name: &str) -> Result<Controller> {
+    let services = QosProfile::subscription_default()
+        .reliability_reliable(ros2_client::qos::WhenFull::DEFAULT)
+        .history(History::KeepLast { depth: 10 });
+    let status = services
+        .clone()
+        .history(History::KeepLast { depth: 1 })
+        .durability(ros2_client::qos::Durability::TransientLocal);
+    let qos = ActionClientQosPolicies {
+        goal_service: services.clone(),
+        result_service: services.clone(),
+        cancel_service: services.clone(),
+        feedback_subscription: services,
+        status_subscription: status,
+    };
+    node.create_action_client(
+        ServiceMapping::Enhanced,
+        &topic_name(name, "controller.action")?,
+        &ActionTypeName::new("control_msgs", "FollowJointTrajectory"),
+        qos,
+    )
+    .map_err(|e| dds(&format!("action client {name}"), e))
+}
+
+/// Send `trajectory` to the controller and log what becomes of it: the
+/// goal's acceptance, then its result (within the motion's duration and a
+/// minute).
+async fn follow(controller: Arc<Controller>, trajectory: JointTrajectory) {
+    let duration = trajectory
+        .points
+        .last()
+        .map_or(0.0, |p| p.time_from_start.seconds());
+    let goal = FollowJointTrajectoryGoal {
+        trajectory,
+        ..FollowJointTrajectoryGoal::default()
+    };
+    let sent = tokio::time::timeout(GOAL_RESPONSE_TIMEOUT, controller.async_send_goal(goal)).await;
+    let goal_id = match sent {
+        Ok(Ok((id, response))) if response.accepted => id,
+        Ok(Ok(_)) => return tracing::warn!("the controller rejected the trajectory"),
+        Ok(Err(e)) => return tracing::error!(error = ?e, "the goal could not be sent"),
+        Err(_) => return tracing::error!("no answer from the controller within 5 s"),
+    };
+    tracing::info!("the controller accepted the trajectory");
+    let wait = Duration::from_secs_f64(duration + 60.0);
+    match tokio::time::timeout(wait, controller.async_request_result(goal_id)).await {
+        Ok(Ok((status, result))) => tracing::info!(
+            ?status,
+            error_code = result.error_code,
+            error = %result.error_string,
+            "the controller finished the trajectory"
+        ),
+        Ok(Err(e)) => tracing::error!(error = ?e, "no result from the controller"),
+        Err(_) => tracing::error!("no result from the controller in time"),
+    }
 }
 
 /// A target waiting for its plan.
@@ -308,10 +383,13 @@ impl NodeState {
         let optimal = result.status == Status::Optimal;
         if optimal {
             self.counters.optimal += 1;
-            match outputs
-                .trajectory
-                .publish(trajectory_message(&result.trajectory))
-            {
+            let message = trajectory_message(&result.trajectory);
+            // Only an `optimal` answer ever reaches the controller.
+            if let Some(controller) = &outputs.controller {
+                self.counters.goals_sent += 1;
+                tokio::spawn(follow(controller.clone(), message.clone()));
+            }
+            match outputs.trajectory.publish(message) {
                 Ok(()) => self.counters.published += 1,
                 Err(e) => tracing::error!(error = ?e, "the trajectory could not be published"),
             }
@@ -460,6 +538,10 @@ async fn serve(
             ("diagnostic_msgs", "DiagnosticArray"),
             &out_qos,
         )?,
+        controller: match settings.controller.action.as_str() {
+            "" => None,
+            name => Some(Arc::new(controller(&mut node, name)?)),
+        },
     };
     tracing::info!(
         node = %settings.node_name,

@@ -31,6 +31,10 @@ impl Cdr {
         self.0.push(v);
         self
     }
+    fn u16(&mut self, v: u16) -> &mut Self {
+        self.align(2).0.extend_from_slice(&v.to_le_bytes());
+        self
+    }
     fn u32(&mut self, v: u32) -> &mut Self {
         self.align(4).0.extend_from_slice(&v.to_le_bytes());
         self
@@ -313,4 +317,59 @@ fn truncated_bytes_are_an_error_not_a_panic() {
             "cut {cut}"
         );
     }
+}
+
+#[test]
+fn control_msgs_follow_joint_trajectory_goal_and_result() {
+    let goal = FollowJointTrajectoryGoal {
+        trajectory: JointTrajectory {
+            header: header(0, 0, ""),
+            joint_names: vec!["j".into()],
+            points: vec![JointTrajectoryPoint {
+                positions: vec![0.5],
+                velocities: vec![],
+                accelerations: vec![],
+                effort: vec![],
+                time_from_start: Time { sec: 4, nanosec: 0 },
+            }],
+        },
+        multi_dof_trajectory: MultiDofJointTrajectory::default(),
+        path_tolerance: vec![JointTolerance {
+            name: "j".into(),
+            position: 0.1,
+            velocity: 0.2,
+            acceleration: 0.3,
+        }],
+        component_path_tolerance: vec![JointComponentTolerance {
+            joint_name: "k".into(),
+            component: 3,
+            position: 1.0,
+            velocity: 2.0,
+            acceleration: 3.0,
+        }],
+        goal_tolerance: vec![],
+        component_goal_tolerance: vec![],
+        goal_time_tolerance: Time { sec: 1, nanosec: 5 },
+    };
+    let mut c = Cdr::default();
+    // trajectory
+    c.header(0, 0, "").strings(&["j"]).u32(1);
+    c.f64s(&[0.5]).f64s(&[]).f64s(&[]).f64s(&[]).time(4, 0);
+    // multi_dof_trajectory: header, no names, no points
+    c.header(0, 0, "").strings(&[]).u32(0);
+    // path_tolerance
+    c.u32(1).string("j").f64(0.1).f64(0.2).f64(0.3);
+    // component_path_tolerance: the uint16 aligned to 2, then float64s to 8
+    c.u32(1).string("k").u16(3).f64(1.0).f64(2.0).f64(3.0);
+    // goal_tolerance, component_goal_tolerance, goal_time_tolerance
+    c.u32(0).u32(0).time(1, 5);
+    pinned(&goal, &c.0);
+
+    let result = FollowJointTrajectoryResult {
+        error_code: -4,
+        error_string: "path".into(),
+    };
+    let mut c = Cdr::default();
+    c.i32(-4).string("path");
+    pinned(&result, &c.0);
 }

@@ -17,13 +17,17 @@ use dpmp::net::Model;
 use dpmp::optim::report::RosDuration;
 use dpmp::robot::Robot;
 use dpmp::ros2::config::Reliability;
-use dpmp::ros2::msg::{DiagnosticStatus, JointTrajectory, Time};
+use dpmp::ros2::msg::{
+    DiagnosticStatus, FollowJointTrajectoryFeedback, FollowJointTrajectoryGoal,
+    FollowJointTrajectoryResult, JointTrajectory, Time,
+};
 use dpmp::ros2::replay::{Cell, Frame};
 use dpmp::ros2::NodeSettings;
 use dpmp::synth::dataset::TargetRecord;
 use dpmp::synth::generate::Generator;
 use dpmp::synth::settings::SynthSettings;
-use ros2_client::{MessageTypeName, Name, Publisher};
+use ros2_client::action::{ActionServerQosPolicies, SendGoalResponse};
+use ros2_client::{ActionTypeName, MessageTypeName, Name, Publisher, ServiceMapping};
 use serde_json::{json, Value};
 use std::sync::Arc;
 use std::time::Duration;
@@ -34,9 +38,10 @@ const DEADLINE_S: f64 = 60.0;
 /// Time for the node to take in what the cell published.
 const SETTLE: Duration = Duration::from_millis(300);
 
-/// A domain of this test's own, away from ROS's default 0.
-fn domain() -> u16 {
-    100 + (std::process::id() % 100) as u16
+/// A domain of this test run's own, away from ROS's default 0; one per
+/// test (`test` 0 or 1), as they run at once.
+fn domain(test: u16) -> u16 {
+    100 + 2 * (std::process::id() % 50) as u16 + test
 }
 
 /// A generated plant: its record, its images as messages and as PNGs.
@@ -93,7 +98,7 @@ fn scene(robot: &Robot, model: &Model) -> Scene {
 fn settings(record: &TargetRecord) -> NodeSettings {
     let mut s = NodeSettings {
         namespace: "picker".into(),
-        domain_id: domain(),
+        domain_id: domain(0),
         deadline_s: DEADLINE_S,
         max_input_age_s: 30.0,
         ..NodeSettings::default()
@@ -280,5 +285,124 @@ fn the_node_plans_what_v1_plan_plans_and_survives_bad_messages() {
         (counters.planned, counters.optimal, counters.published),
         (2, 2, 2),
         "{counters:?}"
+    );
+}
+
+/// The controller's action in the action test.
+const ACTION: &str = "/fr3_arm_controller/follow_joint_trajectory";
+
+type Server = ros2_client::ActionServer<
+    FollowJointTrajectoryGoal,
+    FollowJointTrajectoryResult,
+    FollowJointTrajectoryFeedback,
+>;
+
+/// A stand-in `FollowJointTrajectory` server on the cell's node.
+fn controller(cell: &mut Cell) -> Server {
+    let qos = ros2_client::QosProfile::subscription_default()
+        .reliability_reliable(ros2_client::qos::WhenFull::DEFAULT)
+        .history(ros2_client::qos::History::KeepLast { depth: 10 });
+    let policies = ActionServerQosPolicies {
+        goal_service: qos.clone(),
+        result_service: qos.clone(),
+        cancel_service: qos.clone(),
+        feedback_publisher: qos.clone(),
+        status_publisher: qos,
+    };
+    cell.node_mut()
+        .create_action_server(
+            ServiceMapping::Enhanced,
+            &Name::parse(ACTION).unwrap(),
+            &ActionTypeName::new("control_msgs", "FollowJointTrajectory"),
+            policies,
+        )
+        .unwrap()
+}
+
+/// The next goal the server receives within `wait`, accepted.
+async fn next_goal(server: &Server, wait: Duration) -> Option<FollowJointTrajectoryGoal> {
+    let until = std::time::Instant::now() + wait;
+    while std::time::Instant::now() < until {
+        if let Ok(Some((id, request))) = server.receive_goal() {
+            let accepted = SendGoalResponse {
+                accepted: true,
+                stamp: ros2_client::builtin_interfaces::Time::now(),
+            };
+            server.send_goal_response(id, accepted).unwrap();
+            return Some(request.goal);
+        }
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+    None
+}
+
+#[test]
+fn only_optimal_answers_reach_the_controller_action() {
+    let model = Model::shipped().unwrap();
+    let robot = Robot::panda().unwrap();
+    let scene = scene(&robot, &model);
+    // Two nodes in two namespaces, one controller: `picker` plans in
+    // time, `hasty` has a 1 ms budget (its answers are not `optimal`).
+    let node_settings = |namespace: &str, deadline_s: f64| {
+        let mut s = NodeSettings {
+            namespace: namespace.into(),
+            domain_id: domain(1),
+            deadline_s,
+            max_input_age_s: 30.0,
+            ..NodeSettings::default()
+        };
+        s.qos.sensors = Reliability::Reliable;
+        s.plan.mask_applied = true;
+        s.controller.action = ACTION.into();
+        s
+    };
+    let (picker, hasty) = (
+        node_settings("picker", DEADLINE_S),
+        node_settings("hasty", 1e-3),
+    );
+    let (model, robot) = (Arc::new(model), Arc::new(robot));
+    let nodes = [&picker, &hasty]
+        .map(|s| dpmp::ros2::spawn(s.clone(), model.clone(), robot.clone()).unwrap());
+    let timeout = Duration::from_secs_f64(DEADLINE_S + 30.0);
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    runtime.block_on(async {
+        let mut hasty_cell = Cell::new(&hasty).unwrap();
+        let mut cell = Cell::new(&picker).unwrap();
+        let server = controller(&mut cell);
+        cell.wait_for_node(Duration::from_secs(30)).await.unwrap();
+        hasty_cell
+            .wait_for_node(Duration::from_secs(30))
+            .await
+            .unwrap();
+        let frame = &scene.frame;
+
+        hasty_cell
+            .sensors(frame, stamps(2, 2), SETTLE)
+            .await
+            .unwrap();
+        let answer = hasty_cell.request(frame.roi, timeout).await.unwrap();
+        assert_eq!(answer.status.level, DiagnosticStatus::WARN, "{answer:?}");
+        assert!(answer.trajectory.is_none());
+        assert!(next_goal(&server, Duration::from_secs(2)).await.is_none());
+
+        cell.sensors(frame, stamps(2, 2), SETTLE).await.unwrap();
+        let answer = cell.request(frame.roi, timeout).await.unwrap();
+        assert_eq!(answer.status.level, DiagnosticStatus::OK, "{answer:?}");
+        let goal = next_goal(&server, Duration::from_secs(20)).await.unwrap();
+        assert_eq!(Some(&goal.trajectory), answer.trajectory.as_ref());
+        assert!(goal.path_tolerance.is_empty() && goal.multi_dof_trajectory.points.is_empty());
+        drop(server);
+        cell.close().await;
+        hasty_cell.close().await;
+    });
+    let [picker, hasty] = nodes.map(|n| n.stop().unwrap());
+    assert_eq!((picker.goals_sent, picker.optimal), (1, 1), "{picker:?}");
+    assert_eq!(
+        (hasty.goals_sent, hasty.optimal, hasty.planned),
+        (0, 0, 1),
+        "{hasty:?}"
     );
 }
