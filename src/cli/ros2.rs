@@ -116,6 +116,12 @@ mod with_ros2 {
     use std::sync::Arc;
     use std::time::Duration;
 
+    /// dpmp's log at `info`; the DDS stack's only from `warn` (its `info`
+    /// is every discovery step).
+    fn init_logging(json: bool) {
+        crate::cli::serve::init_logging_with(json, "info,rustdds=warn,ros2_client=warn");
+    }
+
     /// The settings the flags say.
     fn settings(args: &NodeArgs) -> Result<NodeSettings> {
         let mut settings = match &args.params_file {
@@ -147,7 +153,7 @@ mod with_ros2 {
 
     /// `dpmp ros2 node`.
     pub fn node(args: NodeArgs) -> Result<()> {
-        crate::cli::serve::init_logging(args.log_json);
+        init_logging(args.log_json);
         let settings = settings(&args)?;
         let (model, robot) = model_and_robot(&args)?;
         let node = crate::ros2::spawn(settings, model, robot)?;
@@ -162,7 +168,7 @@ mod with_ros2 {
         if !(1..=10_000).contains(&args.targets) {
             return Err(Error::invalid("--targets", "must be in 1..=10000"));
         }
-        crate::cli::serve::init_logging(args.node.log_json);
+        init_logging(args.node.log_json);
         let settings = settings(&args.node)?;
         let (model, robot) = model_and_robot(&args.node)?;
         let frames = frames(&model, &robot, args.targets, args.seed)?;

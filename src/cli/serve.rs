@@ -203,8 +203,13 @@ fn load_token(file: Option<&std::path::Path>) -> Result<Option<Token>> {
 
 /// Structured logs to stderr; `RUST_LOG` filters (default `info`).
 pub(crate) fn init_logging(json: bool) {
+    init_logging_with(json, "info")
+}
+
+/// Logging to stderr with `default` as the filter unless `RUST_LOG` is set.
+pub(crate) fn init_logging_with(json: bool, default: &str) {
     use tracing_subscriber::EnvFilter;
-    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
+    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(default));
     let builder = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr);

@@ -17,7 +17,7 @@ use super::msg::{
     FollowJointTrajectoryGoal, FollowJointTrajectoryResult, Image, JointState, JointTrajectory,
     RegionOfInterest, TransformStamped,
 };
-use super::names::{node_name, topic_name};
+use super::names::{node_name, resolved_topic};
 use super::plan::plan_request;
 use crate::net::Model;
 use crate::optim::report::{RosDuration, Status};
@@ -146,8 +146,9 @@ fn topic(
     ty: (&str, &str),
     qos: &QosProfile,
 ) -> Result<ros2_client::dds::rustdds::Topic> {
+    let namespace = node.namespace().to_string();
     node.create_topic(
-        &topic_name(topic, setting)?,
+        &resolved_topic(&namespace, topic, setting)?,
         MessageTypeName::new(ty.0, ty.1),
         qos,
     )
@@ -215,7 +216,7 @@ fn controller(node: &mut Node, name: &str) -> Result<Controller> {
     };
     node.create_action_client(
         ServiceMapping::Enhanced,
-        &topic_name(name, "controller.action")?,
+        &resolved_topic(&node.namespace().to_string(), name, "controller.action")?,
         &ActionTypeName::new("control_msgs", "FollowJointTrajectory"),
         qos,
     )

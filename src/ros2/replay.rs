@@ -9,7 +9,7 @@ use super::msg::{
     CameraInfo, DiagnosticArray, DiagnosticStatus, Header, Image, JointState, JointTrajectory,
     RegionOfInterest, Time,
 };
-use super::names::{node_name, topic_name};
+use super::names::{node_name, resolved_topic};
 use crate::perception::{CameraModel, DepthImage};
 use crate::{Error, Result};
 use futures::StreamExt;
@@ -164,14 +164,19 @@ fn dds(what: &str, e: impl std::fmt::Debug) -> Error {
     Error::Numerical(format!("ROS 2 {what}: {e:?}"))
 }
 
+/// The topic `name` resolved in the cell node's namespace.
+fn topic(node: &Node, name: &str, ty: (&str, &str)) -> Result<ros2_client::dds::rustdds::Topic> {
+    let namespace = node.namespace().to_string();
+    node.create_topic(
+        &resolved_topic(&namespace, name, name)?,
+        MessageTypeName::new(ty.0, ty.1),
+        &reliable(),
+    )
+    .map_err(|e| dds(name, e))
+}
+
 fn publisher<M: Serialize>(node: &mut Node, name: &str, ty: (&str, &str)) -> Result<Publisher<M>> {
-    let t = node
-        .create_topic(
-            &topic_name(name, name)?,
-            MessageTypeName::new(ty.0, ty.1),
-            &reliable(),
-        )
-        .map_err(|e| dds(name, e))?;
+    let t = topic(node, name, ty)?;
     node.create_publisher(&t, None).map_err(|e| dds(name, e))
 }
 
@@ -180,13 +185,7 @@ fn subscription<M: 'static + DeserializeOwned>(
     name: &str,
     ty: (&str, &str),
 ) -> Result<Subscription<M>> {
-    let t = node
-        .create_topic(
-            &topic_name(name, name)?,
-            MessageTypeName::new(ty.0, ty.1),
-            &reliable(),
-        )
-        .map_err(|e| dds(name, e))?;
+    let t = topic(node, name, ty)?;
     node.create_subscription(&t, None).map_err(|e| dds(name, e))
 }
 
