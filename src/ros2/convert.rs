@@ -63,8 +63,9 @@ fn row(msg: &Image, y: u32, bytes_per_pixel: u32) -> &[u8] {
     &msg.data[start..start + (msg.width * bytes_per_pixel) as usize]
 }
 
-/// A colour image (`rgb8` or `bgr8`) as the network's input.
-pub fn colour_image(msg: &Image, field: &str, max_pixels: u64) -> Result<DynamicImage> {
+/// Check a colour image message's encoding (`rgb8` or `bgr8`) and size
+/// without reading its pixels; whether it is `bgr8`.
+pub fn check_colour(msg: &Image, field: &str, max_pixels: u64) -> Result<bool> {
     let bgr = match msg.encoding.as_str() {
         "rgb8" => false,
         "bgr8" => true,
@@ -76,6 +77,28 @@ pub fn colour_image(msg: &Image, field: &str, max_pixels: u64) -> Result<Dynamic
         }
     };
     checked_size(msg, field, 3, max_pixels)?;
+    Ok(bgr)
+}
+
+/// Check a depth image message's encoding (`16UC1`, `mono16` or `32FC1`)
+/// and size without reading its pixels.
+pub fn check_depth(msg: &Image, field: &str, max_pixels: u64) -> Result<()> {
+    let bytes_per_pixel = match msg.encoding.as_str() {
+        "16UC1" | "mono16" => 2,
+        "32FC1" => 4,
+        other => {
+            return Err(Error::invalid(
+                format!("{field}.encoding"),
+                format!("expected 16UC1 (mm) or 32FC1 (m), got {other:?}"),
+            ))
+        }
+    };
+    checked_size(msg, field, bytes_per_pixel, max_pixels)
+}
+
+/// A colour image (`rgb8` or `bgr8`) as the network's input.
+pub fn colour_image(msg: &Image, field: &str, max_pixels: u64) -> Result<DynamicImage> {
+    let bgr = check_colour(msg, field, max_pixels)?;
     let mut pixels = Vec::with_capacity(msg.width as usize * msg.height as usize * 3);
     for y in 0..msg.height {
         let r = row(msg, y, 3);
@@ -95,10 +118,10 @@ pub fn colour_image(msg: &Image, field: &str, max_pixels: u64) -> Result<Dynamic
 /// range of [`FLOAT_DEPTH_SCALE_M`] is "no return" (REP 117); a negative
 /// one refuses the message.
 pub fn depth_image(msg: &Image, field: &str, max_pixels: u64) -> Result<DepthImage> {
+    check_depth(msg, field, max_pixels)?;
     let data_field = format!("{field}.data");
     match msg.encoding.as_str() {
         "16UC1" | "mono16" => {
-            checked_size(msg, field, 2, max_pixels)?;
             let mut units = Vec::with_capacity(msg.width as usize * msg.height as usize);
             for y in 0..msg.height {
                 units.extend(row(msg, y, 2).chunks_exact(2).map(|b| {
@@ -118,8 +141,8 @@ pub fn depth_image(msg: &Image, field: &str, max_pixels: u64) -> Result<DepthIma
                 &data_field,
             )
         }
-        "32FC1" => {
-            checked_size(msg, field, 4, max_pixels)?;
+        _ => {
+            // 32FC1, as checked.
             let mut metres = Vec::with_capacity(msg.width as usize * msg.height as usize);
             for y in 0..msg.height {
                 for b in row(msg, y, 4).chunks_exact(4) {
@@ -141,10 +164,6 @@ pub fn depth_image(msg: &Image, field: &str, max_pixels: u64) -> Result<DepthIma
             DepthImage::from_metres(msg.width, msg.height, FLOAT_DEPTH_SCALE_M, &metres)
                 .map_err(|e| e.within(field))
         }
-        other => Err(Error::invalid(
-            format!("{field}.encoding"),
-            format!("expected 16UC1 (mm) or 32FC1 (m), got {other:?}"),
-        )),
     }
 }
 

@@ -16,11 +16,14 @@
 //! turns messages into the plan's inputs and its answer into messages,
 //! [`inputs`] keeps the newest inputs and matches them to a target,
 //! [`plan`] builds the one [`crate::plan::PlanRequest`] `/v1/plan` would,
-//! [`config`] reads the ROS-style parameters, and [`node`] runs the DDS
-//! side. Like the HTTP service it is a shell: the planning is the
-//! library's, with the service's deadline and image limit by default.
+//! [`config`] reads the ROS-style parameters, [`names`] resolves ROS
+//! names, [`node`] runs the DDS side, [`controller`] sends `optimal`
+//! trajectories to a controller action, and [`replay`] is a stand-in cell
+//! that drives a node. Like the HTTP service it is a shell: the planning
+//! is the library's, with the service's deadline and limits by default.
 
 pub mod config;
+pub mod controller;
 pub mod convert;
 pub mod inputs;
 pub mod msg;

@@ -10,15 +10,18 @@
 //! check, is logged and counted; nothing stops the node but [`RunningNode::stop`].
 
 use super::config::{NodeSettings, Reliability};
-use super::convert::{diagnostics, distortion_norm, trajectory_message};
+use super::controller::{controller, follow, Controller};
+use super::convert::{
+    camera_model, check_colour, check_depth, diagnostics, distortion_norm, start_configuration,
+    trajectory_message,
+};
 use super::inputs::{LatestInputs, MatchRules};
 use super::msg::{
-    CameraInfo, DiagnosticArray, DiagnosticStatus, FollowJointTrajectoryFeedback,
-    FollowJointTrajectoryGoal, FollowJointTrajectoryResult, Image, JointState, JointTrajectory,
+    CameraInfo, DiagnosticArray, DiagnosticStatus, Image, JointState, JointTrajectory,
     RegionOfInterest, TransformStamped,
 };
 use super::names::{node_name, resolved_topic};
-use super::plan::plan_request;
+use super::plan::{camera_pose, plan_request};
 use crate::net::Model;
 use crate::optim::report::{RosDuration, Status};
 use crate::optim::SolveControl;
@@ -26,11 +29,10 @@ use crate::plan::{predict_and_optimize, PlanResponse};
 use crate::robot::Robot;
 use crate::{Error, Result};
 use futures::{pin_mut, Stream, StreamExt};
-use ros2_client::action::ActionClientQosPolicies;
 use ros2_client::qos::History;
 use ros2_client::{
-    ActionClient, ActionTypeName, Context, ContextOptions, MessageInfo, MessageTypeName, Node,
-    NodeOptions, Publisher, QosProfile, ServiceMapping, Subscription,
+    Context, ContextOptions, MessageInfo, MessageTypeName, Node, NodeOptions, Publisher,
+    QosProfile, Subscription,
 };
 use serde::de::DeserializeOwned;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -44,6 +46,10 @@ pub struct Counters {
     pub received: u64,
     /// Messages that could not be decoded.
     pub undecodable: u64,
+    /// Messages decoded but failing a check on receipt (encoding, size,
+    /// NaN, unknown joints, camera model): kept as the newest, so a target
+    /// that would use one is refused naming the field.
+    pub rejected: u64,
     /// Targets refused: stale, unmatched or bad inputs.
     pub refused: u64,
     /// Targets replaced by a newer one before their plan started.
@@ -179,81 +185,12 @@ fn advertise<M: serde::Serialize>(
         .map_err(|e| dds(&format!("publisher {name}"), e))
 }
 
-/// The controller's `FollowJointTrajectory` action.
-type Controller = ActionClient<
-    FollowJointTrajectoryGoal,
-    FollowJointTrajectoryResult,
-    FollowJointTrajectoryFeedback,
->;
-
-/// How long the controller has to accept or reject a goal.
-const GOAL_RESPONSE_TIMEOUT: Duration = Duration::from_secs(5);
-
 /// The node's publications.
 struct Outputs {
     trajectory: Publisher<JointTrajectory>,
     diagnostics: Publisher<DiagnosticArray>,
     /// The controller action, when one is configured.
     controller: Option<Arc<Controller>>,
-}
-
-/// The action client for `name`, with ROS 2's default action QoS
-/// (reliable services and feedback, a transient-local status topic).
-fn controller(node: &mut Node, name: &str) -> Result<Controller> {
-    let services = QosProfile::subscription_default()
-        .reliability_reliable(ros2_client::qos::WhenFull::DEFAULT)
-        .history(History::KeepLast { depth: 10 });
-    let status = services
-        .clone()
-        .history(History::KeepLast { depth: 1 })
-        .durability(ros2_client::qos::Durability::TransientLocal);
-    let qos = ActionClientQosPolicies {
-        goal_service: services.clone(),
-        result_service: services.clone(),
-        cancel_service: services.clone(),
-        feedback_subscription: services,
-        status_subscription: status,
-    };
-    node.create_action_client(
-        ServiceMapping::Enhanced,
-        &resolved_topic(&node.namespace().to_string(), name, "controller.action")?,
-        &ActionTypeName::new("control_msgs", "FollowJointTrajectory"),
-        qos,
-    )
-    .map_err(|e| dds(&format!("action client {name}"), e))
-}
-
-/// Send `trajectory` to the controller and log what becomes of it: the
-/// goal's acceptance, then its result (within the motion's duration and a
-/// minute).
-async fn follow(controller: Arc<Controller>, trajectory: JointTrajectory) {
-    let duration = trajectory
-        .points
-        .last()
-        .map_or(0.0, |p| p.time_from_start.seconds());
-    let goal = FollowJointTrajectoryGoal {
-        trajectory,
-        ..FollowJointTrajectoryGoal::default()
-    };
-    let sent = tokio::time::timeout(GOAL_RESPONSE_TIMEOUT, controller.async_send_goal(goal)).await;
-    let goal_id = match sent {
-        Ok(Ok((id, response))) if response.accepted => id,
-        Ok(Ok(_)) => return tracing::warn!("the controller rejected the trajectory"),
-        Ok(Err(e)) => return tracing::error!(error = ?e, "the goal could not be sent"),
-        Err(_) => return tracing::error!("no answer from the controller within 5 s"),
-    };
-    tracing::info!("the controller accepted the trajectory");
-    let wait = Duration::from_secs_f64(duration + 60.0);
-    match tokio::time::timeout(wait, controller.async_request_result(goal_id)).await {
-        Ok(Ok((status, result))) => tracing::info!(
-            ?status,
-            error_code = result.error_code,
-            error = %result.error_string,
-            "the controller finished the trajectory"
-        ),
-        Ok(Err(e)) => tracing::error!(error = ?e, "no result from the controller"),
-        Err(_) => tracing::error!("no result from the controller in time"),
-    }
 }
 
 /// A target waiting for its plan.
@@ -278,6 +215,7 @@ struct NodeState {
     inputs: LatestInputs,
     pending: Option<Target>,
     counters: Counters,
+    rejected_by_topic: std::collections::HashMap<String, u64>,
     warned_distortion: bool,
 }
 
@@ -301,7 +239,46 @@ impl NodeState {
         }
     }
 
+    /// Count and log a message that failed its check on receipt: the
+    /// first of each topic, then every 100th.
+    fn checked(&mut self, topic: &str, check: Result<()>) {
+        if let Err(e) = check {
+            self.counters.rejected += 1;
+            let n = self.rejected_by_topic.entry(topic.to_string()).or_insert(0);
+            *n += 1;
+            if *n % 100 == 1 {
+                tracing::warn!(topic, count = *n, reason = %e, "bad message");
+            }
+        }
+    }
+
+    fn on_color(&mut self, msg: Image, at: Instant) {
+        let check = check_colour(&msg, "color", self.settings.max_image_pixels);
+        self.checked("color", check.map(|_| ()));
+        self.inputs.color(msg, at);
+    }
+
+    fn on_depth(&mut self, msg: Image, at: Instant) {
+        let check = check_depth(&msg, "depth", self.settings.max_image_pixels);
+        self.checked("depth", check);
+        self.inputs.depth(msg, at);
+    }
+
+    fn on_joint_state(&mut self, msg: JointState, at: Instant) {
+        let check = start_configuration(&msg, "joint_states", self.robot.joint_names());
+        self.checked("joint_states", check.map(|_| ()));
+        self.inputs.joint_state(msg, at);
+    }
+
+    fn on_camera_pose(&mut self, msg: TransformStamped, at: Instant) {
+        let check = camera_pose(&msg, "camera_pose");
+        self.checked("camera_pose", check.map(|_| ()));
+        self.inputs.camera_pose(msg, at);
+    }
+
     fn on_camera_info(&mut self, msg: CameraInfo, at: Instant) {
+        let check = camera_model(&msg, "camera_info", &self.model.config().camera_model());
+        self.checked("camera_info", check.map(|_| ()));
         if !self.warned_distortion && distortion_norm(&msg) > 1e-6 {
             self.warned_distortion = true;
             tracing::warn!(
@@ -363,6 +340,7 @@ impl NodeState {
             ("refused", c.refused.to_string()),
             ("received", c.received.to_string()),
             ("undecodable", c.undecodable.to_string()),
+            ("rejected", c.rejected.to_string()),
         ];
         publish_diagnostics(
             outputs,
@@ -424,6 +402,7 @@ impl NodeState {
             ("published", self.counters.published.to_string()),
             ("refused", self.counters.refused.to_string()),
             ("undecodable", self.counters.undecodable.to_string()),
+            ("rejected", self.counters.rejected.to_string()),
         ];
         publish_diagnostics(outputs, level, message, &values);
     }
@@ -558,6 +537,7 @@ async fn serve(
         inputs: LatestInputs::default(),
         pending: None,
         counters: Counters::default(),
+        rejected_by_topic: Default::default(),
         warned_distortion: false,
     };
     let (color, depth, info, joints, target) = (
@@ -582,19 +562,19 @@ async fn serve(
         tokio::select! {
             _ = tick.tick() => {}
             Some(item) = color.next() => {
-                if let Some(m) = state.decoded("color", item) { state.inputs.color(m, Instant::now()) }
+                if let Some(m) = state.decoded("color", item) { state.on_color(m, Instant::now()) }
             }
             Some(item) = depth.next() => {
-                if let Some(m) = state.decoded("depth", item) { state.inputs.depth(m, Instant::now()) }
+                if let Some(m) = state.decoded("depth", item) { state.on_depth(m, Instant::now()) }
             }
             Some(item) = info.next() => {
                 if let Some(m) = state.decoded("camera_info", item) { state.on_camera_info(m, Instant::now()) }
             }
             Some(item) = joints.next() => {
-                if let Some(m) = state.decoded("joint_states", item) { state.inputs.joint_state(m, Instant::now()) }
+                if let Some(m) = state.decoded("joint_states", item) { state.on_joint_state(m, Instant::now()) }
             }
             Some(item) = pose.next() => {
-                if let Some(m) = state.decoded("camera_pose", item) { state.inputs.camera_pose(m, Instant::now()) }
+                if let Some(m) = state.decoded("camera_pose", item) { state.on_camera_pose(m, Instant::now()) }
             }
             Some(item) = target.next() => {
                 if let Some(m) = state.decoded("target", item) { state.on_target(m, Instant::now()) }

@@ -280,6 +280,8 @@ fn the_node_plans_what_v1_plan_plans_and_survives_bad_messages() {
     });
     let counters = node.stop().unwrap();
     assert_eq!(counters.undecodable, 1, "{counters:?}");
+    // The four bad messages, each counted as it arrived.
+    assert_eq!(counters.rejected, 4, "{counters:?}");
     assert_eq!(counters.refused, 5, "{counters:?}");
     assert_eq!(
         (counters.planned, counters.optimal, counters.published),
