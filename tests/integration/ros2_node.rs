@@ -44,6 +44,14 @@ fn domain(test: u16) -> u16 {
     100 + 2 * (std::process::id() % 50) as u16 + test
 }
 
+/// The test side's runtime (one thread: the cell's loop).
+fn runtime() -> tokio::runtime::Runtime {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap()
+}
+
 /// A generated plant: its record, its images as messages and as PNGs.
 struct Scene {
     record: TargetRecord,
@@ -200,11 +208,7 @@ fn the_node_plans_what_v1_plan_plans_and_survives_bad_messages() {
     let http = http_plan(&scene, &model, &off_home(&robot));
     assert_eq!(http["status"], "optimal", "{}", http["reason"]);
     let timeout = Duration::from_secs_f64(DEADLINE_S + 30.0);
-    let runtime = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap();
-    runtime.block_on(async {
+    runtime().block_on(async {
         let mut cell = Cell::new(&settings).unwrap();
         // One byte on the colour topic: not an Image.
         let image = MessageTypeName::new("sensor_msgs", "Image");
@@ -366,11 +370,7 @@ fn only_optimal_answers_reach_the_controller_action() {
     let nodes = [&picker, &hasty]
         .map(|s| dpmp::ros2::spawn(s.clone(), model.clone(), robot.clone()).unwrap());
     let timeout = Duration::from_secs_f64(DEADLINE_S + 30.0);
-    let runtime = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap();
-    runtime.block_on(async {
+    runtime().block_on(async {
         let mut hasty_cell = Cell::new(&hasty).unwrap();
         let mut cell = Cell::new(&picker).unwrap();
         let server = controller(&mut cell);
