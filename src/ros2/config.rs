@@ -129,16 +129,12 @@ pub struct PlanSettings {
     /// `/v1/optimize`'s scene and constraint fields (`obstacles`,
     /// `clearance_m`, `duration_s`, `options`, ...); `start` comes from the
     /// joint states and the trajectory is written for ROS 2.
-    #[serde(default = "empty_task")]
+    #[serde(default)]
     pub task: Task,
 }
 
 fn depth_world() -> WorldSource {
     WorldSource::Depth
-}
-
-fn empty_task() -> Task {
-    serde_json::from_value(serde_json::json!({})).unwrap_or_else(|_| unreachable!())
 }
 
 impl Default for PlanSettings {
@@ -148,7 +144,7 @@ impl Default for PlanSettings {
             world: WorldSource::Depth,
             goal_standoff_m: None,
             goal: None,
-            task: empty_task(),
+            task: Task::default(),
         }
     }
 }

@@ -215,7 +215,7 @@ struct NodeState {
     inputs: LatestInputs,
     pending: Option<Target>,
     counters: Counters,
-    rejected_by_topic: std::collections::HashMap<String, u64>,
+    bad_by_topic: std::collections::HashMap<String, u64>,
     warned_distortion: bool,
 }
 
@@ -233,22 +233,27 @@ impl NodeState {
             }
             Err(e) => {
                 self.counters.undecodable += 1;
-                tracing::warn!(topic, error = ?e, "undecodable message ignored");
+                self.log_bad(topic, "undecodable message ignored", &format!("{e:?}"));
                 None
             }
         }
     }
 
-    /// Count and log a message that failed its check on receipt: the
-    /// first of each topic, then every 100th.
+    /// Count and log a message that failed its check on receipt.
     fn checked(&mut self, topic: &str, check: Result<()>) {
         if let Err(e) = check {
             self.counters.rejected += 1;
-            let n = self.rejected_by_topic.entry(topic.to_string()).or_insert(0);
-            *n += 1;
-            if *n % 100 == 1 {
-                tracing::warn!(topic, count = *n, reason = %e, "bad message");
-            }
+            self.log_bad(topic, "bad message", &e.to_string());
+        }
+    }
+
+    /// Log a bad message: the first of each topic, then every 100th (a
+    /// camera sending bad frames at 30 Hz must not flood the log).
+    fn log_bad(&mut self, topic: &str, what: &str, reason: &str) {
+        let n = self.bad_by_topic.entry(topic.to_string()).or_insert(0);
+        *n += 1;
+        if *n % 100 == 1 {
+            tracing::warn!(topic, count = *n, reason, "{what}");
         }
     }
 
@@ -537,7 +542,7 @@ async fn serve(
         inputs: LatestInputs::default(),
         pending: None,
         counters: Counters::default(),
-        rejected_by_topic: Default::default(),
+        bad_by_topic: Default::default(),
         warned_distortion: false,
     };
     let (color, depth, info, joints, target) = (

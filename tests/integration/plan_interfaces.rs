@@ -111,3 +111,51 @@ fn the_cli_with_a_task_file_answers_as_the_http_route_does() {
     assert_eq!(status, 422, "{answer}");
     assert_eq!(field(&answer), Some("depth_scale_m"), "{answer}");
 }
+
+/// The camera's pose (what the ROS 2 node takes from a `TransformStamped`)
+/// is where the depth is back-projected from: the hand camera's own pose
+/// at home plans exactly as no pose does, and the same pose moved 5 cm
+/// along the base's y axis moves the located berry by those 5 cm.
+#[test]
+fn a_camera_pose_is_where_the_depth_is_seen_from() {
+    use dpmp::net::Model;
+    use dpmp::optim::{SolveControl, Task};
+    use dpmp::perception::Camera;
+    use dpmp::plan::{predict_and_optimize, PlanFields, PlanParts, PlanRequest};
+    use nalgebra::{Isometry3, Translation3};
+    use std::sync::Arc;
+
+    let robot = Arc::new(Robot::panda().unwrap());
+    let model = Arc::new(Model::shipped().unwrap());
+    let generator = Generator::new(SynthSettings::new(1, 1), (*robot).clone()).unwrap();
+    let out = generator.config(21, 0).unwrap();
+    let record = &out.records[0];
+    let home = Camera::at_home(&model.config().camera_model(), &robot)
+        .unwrap()
+        .pose;
+    let plan = |pose: Option<Isometry3<f64>>| {
+        let parts = PlanParts {
+            mask_applied: true,
+            depth: out.depths[0].clone(),
+            camera_pose: pose,
+            ..PlanParts::new(
+                image::DynamicImage::ImageRgb8(out.images[0].clone()),
+                record.bbox,
+                Task::default(),
+            )
+        };
+        let request = PlanRequest::new(parts, &PlanFields::json()).unwrap();
+        predict_and_optimize(&model, &robot, request, &SolveControl::default()).unwrap()
+    };
+    let (none, at_home) = (plan(None), plan(Some(home)));
+    let (a, b) = (none.target.unwrap(), at_home.target.unwrap());
+    assert_eq!(a.position, b.position);
+    assert_eq!(none.result.weights, at_home.result.weights);
+    let moved = plan(Some(Translation3::new(0.0, 0.05, 0.0) * home))
+        .target
+        .unwrap();
+    for (axis, shift) in [0.0, 0.05, 0.0].iter().enumerate() {
+        let d = moved.position[axis] - a.position[axis];
+        assert!((d - shift).abs() < 1e-9, "axis {axis}: moved {d}");
+    }
+}
