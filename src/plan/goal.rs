@@ -96,7 +96,7 @@ pub(super) struct Located {
     source: TargetSource,
 }
 
-/// The berry centre, if the input has one.
+/// The berry centre, if the input has one, seen through `camera` (posed).
 pub(super) fn locate(
     camera: &Camera,
     target: &TargetInput,

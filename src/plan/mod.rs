@@ -114,17 +114,22 @@ pub fn predict_and_optimize(
         ..
     } = request;
     let camera = camera.unwrap_or_else(|| model.config().camera_model());
-    let posed = match camera_pose {
-        Some(pose) => crate::perception::Camera {
+    // The posed camera, only when there is a 3-D target to see through it.
+    let posed = match (&target, camera_pose) {
+        (TargetInput::None, _) => None,
+        (_, Some(pose)) => Some(crate::perception::Camera {
             intrinsics: camera.intrinsics,
             pose,
-        },
-        None => crate::perception::Camera::at_home(&camera, robot)?,
+        }),
+        (_, None) => Some(crate::perception::Camera::at_home(&camera, robot)?),
     };
-    let located = locate(&posed, &target, &target_box)?;
+    let located = match &posed {
+        Some(posed) => locate(posed, &target, &target_box)?,
+        None => None,
+    };
     let depth_m = located.as_ref().map(|l| l.camera_depth_m);
-    let world = match (source, &located) {
-        (WorldSource::Depth, Some(l)) => {
+    let world = match (source, &located, &posed) {
+        (WorldSource::Depth, Some(l), Some(posed)) => {
             let TargetInput::Depth(depth, _) = &target else {
                 return Err(Error::invalid(
                     &world_field,
@@ -136,7 +141,7 @@ pub fn predict_and_optimize(
                 center: l.position,
                 depth_m: l.camera_depth_m,
             };
-            let (sensed, report) = world::sensed_world(depth, &posed, &keep, &world_field)?;
+            let (sensed, report) = world::sensed_world(depth, posed, &keep, &world_field)?;
             task.obstacles.extend(sensed);
             Some(report)
         }
