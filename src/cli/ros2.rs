@@ -157,7 +157,7 @@ mod with_ros2 {
         let settings = settings(&args)?;
         let (model, robot) = model_and_robot(&args)?;
         let node = crate::ros2::spawn(settings, model, robot)?;
-        runtime()?.block_on(wait_for_signal())?;
+        runtime()?.block_on(async { crate::service::Signals::new().next().await });
         let counters = node.stop()?;
         tracing::info!(?counters, "stopped");
         Ok(())
@@ -264,22 +264,5 @@ mod with_ros2 {
             .enable_all()
             .build()
             .map_err(|e| Error::Numerical(format!("cannot start a runtime: {e}")))
-    }
-
-    /// Until SIGINT or SIGTERM.
-    async fn wait_for_signal() -> Result<()> {
-        #[cfg(unix)]
-        {
-            use tokio::signal::unix::{signal, SignalKind};
-            let mut term = signal(SignalKind::terminate())
-                .map_err(|e| Error::Numerical(format!("cannot wait for SIGTERM: {e}")))?;
-            tokio::select! {
-                _ = tokio::signal::ctrl_c() => {}
-                _ = term.recv() => {}
-            }
-        }
-        #[cfg(not(unix))]
-        let _ = tokio::signal::ctrl_c().await;
-        Ok(())
     }
 }

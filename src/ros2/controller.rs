@@ -2,15 +2,17 @@
 //! the client the node sends `optimal` trajectories to, and what becomes
 //! of each goal (logged; the plan loop never waits on it).
 
+use super::config::Reliability;
+use super::dds::{dds, qos};
 use super::msg::{
     FollowJointTrajectoryFeedback, FollowJointTrajectoryGoal, FollowJointTrajectoryResult,
     JointTrajectory,
 };
 use super::names::resolved_topic;
-use crate::{Error, Result};
+use crate::Result;
 use ros2_client::action::ActionClientQosPolicies;
-use ros2_client::qos::{Durability, History, WhenFull};
-use ros2_client::{ActionClient, ActionTypeName, Node, QosProfile, ServiceMapping};
+use ros2_client::qos::{Durability, History};
+use ros2_client::{ActionClient, ActionTypeName, Node, ServiceMapping};
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -27,9 +29,7 @@ const GOAL_RESPONSE_TIMEOUT: Duration = Duration::from_secs(5);
 /// The action client for `name`, with ROS 2's default action QoS
 /// (reliable services and feedback, a transient-local status topic).
 pub fn controller(node: &mut Node, name: &str) -> Result<Controller> {
-    let services = QosProfile::subscription_default()
-        .reliability_reliable(WhenFull::DEFAULT)
-        .history(History::KeepLast { depth: 10 });
+    let services = qos(Reliability::Reliable, 10);
     let status = services
         .clone()
         .history(History::KeepLast { depth: 1 })
@@ -47,7 +47,7 @@ pub fn controller(node: &mut Node, name: &str) -> Result<Controller> {
         &ActionTypeName::new("control_msgs", "FollowJointTrajectory"),
         qos,
     )
-    .map_err(|e| Error::Numerical(format!("ROS 2 action client {name}: {e:?}")))
+    .map_err(|e| dds(&format!("action client {name}"), e))
 }
 
 /// Send `trajectory` to the controller and log what becomes of it: the

@@ -17,7 +17,7 @@
 //! [`inputs`] keeps the newest inputs and matches them to a target,
 //! [`plan`] builds the one [`crate::plan::PlanRequest`] `/v1/plan` would,
 //! [`config`] reads the ROS-style parameters, [`names`] resolves ROS
-//! names, [`node`] runs the DDS side, [`controller`] sends `optimal`
+//! names, [`dds`] makes topics, readers and writers, [`node`] runs the DDS side, [`controller`] sends `optimal`
 //! trajectories to a controller action, and [`replay`] is a stand-in cell
 //! that drives a node. Like the HTTP service it is a shell: the planning
 //! is the library's, with the service's deadline and limits by default.
@@ -25,6 +25,7 @@
 pub mod config;
 pub mod controller;
 pub mod convert;
+pub mod dds;
 pub mod inputs;
 pub mod msg;
 pub mod names;

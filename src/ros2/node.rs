@@ -9,18 +9,19 @@
 //! `JointTrajectory`. A message that cannot be decoded, or is refused by a
 //! check, is logged and counted; nothing stops the node but [`RunningNode::stop`].
 
-use super::config::{NodeSettings, Reliability};
+use super::config::NodeSettings;
 use super::controller::{controller, follow, Controller};
 use super::convert::{
     camera_model, check_colour, check_depth, diagnostics, distortion_norm, start_configuration,
     trajectory_message,
 };
+use super::dds::{advertise, dds, qos, subscribe};
 use super::inputs::{LatestInputs, MatchRules};
 use super::msg::{
     CameraInfo, DiagnosticArray, DiagnosticStatus, Image, JointState, JointTrajectory,
     RegionOfInterest, TransformStamped,
 };
-use super::names::{node_name, resolved_topic};
+use super::names::node_name;
 use super::plan::{camera_pose, plan_request};
 use crate::net::Model;
 use crate::optim::report::{RosDuration, Status};
@@ -29,11 +30,7 @@ use crate::plan::{predict_and_optimize, PlanResponse};
 use crate::robot::Robot;
 use crate::{Error, Result};
 use futures::{pin_mut, Stream, StreamExt};
-use ros2_client::qos::History;
-use ros2_client::{
-    Context, ContextOptions, MessageInfo, MessageTypeName, Node, NodeOptions, Publisher,
-    QosProfile, Subscription,
-};
+use ros2_client::{Context, ContextOptions, MessageInfo, NodeOptions, Publisher, Subscription};
 use serde::de::DeserializeOwned;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -125,65 +122,10 @@ pub fn run(
     runtime.block_on(serve(settings, model, robot, stop))
 }
 
-/// A DDS failure as an error.
-fn dds(what: &str, e: impl std::fmt::Debug) -> Error {
-    Error::Numerical(format!("ROS 2 {what}: {e:?}"))
-}
-
-/// A profile of `reliability` with history depth `depth`.
-fn qos(reliability: Reliability, depth: usize) -> QosProfile {
-    let base = QosProfile::subscription_default().history(History::KeepLast { depth });
-    match reliability {
-        Reliability::BestEffort => base.reliability_best_effort(),
-        Reliability::Reliable => base.reliability_reliable(ros2_client::qos::WhenFull::DEFAULT),
-    }
-}
-
 /// Depth of the sensor topics' history: the newest matters.
 const SENSOR_HISTORY: usize = 1;
 /// Depth of the target and output topics' history.
 const REQUEST_HISTORY: usize = 10;
-
-/// The topic `topic` (the setting `setting`) of type `ty` with `qos`.
-fn topic(
-    node: &Node,
-    topic: &str,
-    setting: &str,
-    ty: (&str, &str),
-    qos: &QosProfile,
-) -> Result<ros2_client::dds::rustdds::Topic> {
-    let namespace = node.namespace().to_string();
-    node.create_topic(
-        &resolved_topic(&namespace, topic, setting)?,
-        MessageTypeName::new(ty.0, ty.1),
-        qos,
-    )
-    .map_err(|e| dds(&format!("topic {topic}"), e))
-}
-
-fn subscribe<M: 'static + DeserializeOwned>(
-    node: &mut Node,
-    name: &str,
-    setting: &str,
-    ty: (&str, &str),
-    qos: &QosProfile,
-) -> Result<Subscription<M>> {
-    let t = topic(node, name, setting, ty, qos)?;
-    node.create_subscription::<M>(&t, None)
-        .map_err(|e| dds(&format!("subscription {name}"), e))
-}
-
-fn advertise<M: serde::Serialize>(
-    node: &mut Node,
-    name: &str,
-    setting: &str,
-    ty: (&str, &str),
-    qos: &QosProfile,
-) -> Result<Publisher<M>> {
-    let t = topic(node, name, setting, ty, qos)?;
-    node.create_publisher::<M>(&t, None)
-        .map_err(|e| dds(&format!("publisher {name}"), e))
-}
 
 /// The node's publications.
 struct Outputs {

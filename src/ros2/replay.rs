@@ -4,20 +4,19 @@
 //! node with it (no camera or robot needed), the latency figure is measured
 //! with it, and the loopback test uses it.
 
-use super::config::NodeSettings;
+use super::config::{NodeSettings, Reliability};
+use super::dds::{advertise, dds, qos, subscribe};
 use super::msg::{
     CameraInfo, DiagnosticArray, DiagnosticStatus, Header, Image, JointState, JointTrajectory,
     RegionOfInterest, Time,
 };
-use super::names::{node_name, resolved_topic};
+use super::names::node_name;
 use crate::perception::{CameraModel, DepthImage};
 use crate::{Error, Result};
 use futures::StreamExt;
 use image::RgbImage;
-use ros2_client::qos::{History, WhenFull};
 use ros2_client::{
-    Context, ContextOptions, MessageTypeName, Node, NodeOptions, Publisher, QosProfile,
-    Subscription,
+    Context, ContextOptions, Node, NodeOptions, Publisher, QosProfile, Subscription,
 };
 use serde::de::DeserializeOwned;
 use serde::Serialize;
@@ -155,29 +154,11 @@ pub struct Cell {
 
 /// Reliable, keep the last 10: nothing the cell sends is lost.
 fn reliable() -> QosProfile {
-    QosProfile::subscription_default()
-        .reliability_reliable(WhenFull::DEFAULT)
-        .history(History::KeepLast { depth: 10 })
-}
-
-fn dds(what: &str, e: impl std::fmt::Debug) -> Error {
-    Error::Numerical(format!("ROS 2 {what}: {e:?}"))
-}
-
-/// The topic `name` resolved in the cell node's namespace.
-fn topic(node: &Node, name: &str, ty: (&str, &str)) -> Result<ros2_client::dds::rustdds::Topic> {
-    let namespace = node.namespace().to_string();
-    node.create_topic(
-        &resolved_topic(&namespace, name, name)?,
-        MessageTypeName::new(ty.0, ty.1),
-        &reliable(),
-    )
-    .map_err(|e| dds(name, e))
+    qos(Reliability::Reliable, 10)
 }
 
 fn publisher<M: Serialize>(node: &mut Node, name: &str, ty: (&str, &str)) -> Result<Publisher<M>> {
-    let t = topic(node, name, ty)?;
-    node.create_publisher(&t, None).map_err(|e| dds(name, e))
+    advertise(node, name, name, ty, &reliable())
 }
 
 fn subscription<M: 'static + DeserializeOwned>(
@@ -185,8 +166,7 @@ fn subscription<M: 'static + DeserializeOwned>(
     name: &str,
     ty: (&str, &str),
 ) -> Result<Subscription<M>> {
-    let t = topic(node, name, ty)?;
-    node.create_subscription(&t, None).map_err(|e| dds(name, e))
+    subscribe(node, name, name, ty, &reliable())
 }
 
 impl Cell {

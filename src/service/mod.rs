@@ -136,16 +136,24 @@ pub async fn shutdown_signal() {
     let _ = received.await;
 }
 
-/// SIGINT and SIGTERM as one stream.
-struct Signals {
+/// SIGINT and SIGTERM as one stream (the service's shutdown, and the ROS 2
+/// node's).
+pub struct Signals {
     #[cfg(unix)]
     interrupt: Option<tokio::signal::unix::Signal>,
     #[cfg(unix)]
     terminate: Option<tokio::signal::unix::Signal>,
 }
 
+impl Default for Signals {
+    fn default() -> Self {
+        Signals::new()
+    }
+}
+
 impl Signals {
-    fn new() -> Signals {
+    /// Start listening (a signal that cannot be listened for never comes).
+    pub fn new() -> Signals {
         #[cfg(unix)]
         {
             use tokio::signal::unix::{signal, SignalKind};
@@ -159,7 +167,7 @@ impl Signals {
     }
 
     /// The next SIGINT or SIGTERM (never, where neither can be received).
-    async fn next(&mut self) {
+    pub async fn next(&mut self) {
         #[cfg(unix)]
         {
             let interrupt = async {
