@@ -201,7 +201,8 @@ pub struct TrajectoryReport {
     /// between two accepted samples (half their displacement bound).
     pub continuous_margin_m: Option<f64>,
     /// Largest excursion beyond the joint limits minus the requested margin
-    /// (rad, 0 when inside).
+    /// (rad, 0 when inside), at the dense samples and at every joint's
+    /// peaks and troughs between them ([`crate::optim::verify::limits`]).
     pub max_joint_limit_violation_rad: f64,
     /// Largest `|dq/dt| / v_max` over joints and time (`v_max` scaled by
     /// `velocity_scaling`).

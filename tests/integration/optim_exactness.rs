@@ -164,14 +164,17 @@ fn max_position_gap(p: &Problem, a: &[f64], b: &[f64]) -> f64 {
 }
 
 /// The whole QP over `z` (`w = μ + L z`): every position and velocity limit
-/// at every optimisation and verification phase, the start equalities;
-/// cost `|z|²`; solved once by Clarabel.
+/// at every optimisation phase, the start equalities; cost `|z|²`; solved
+/// by Clarabel. With `continuous`, also at every verification phase, and
+/// then the limits between them by cutting planes: a scan of 10,000 phases
+/// adds a position row at each local peak beyond a limit, and the QP is
+/// solved again until no peak is beyond by more than [`LIMIT_TOLERANCE`].
 fn direct_solve(
     p: &Problem,
     req: &OptimizeRequest,
     robot: &Robot,
     margin: f64,
-    with_dense: bool,
+    continuous: bool,
 ) -> DVector<f64> {
     let l = Whitening::new(p.prior(), Whitening::default_lambda(p.prior()))
         .unwrap()
@@ -179,38 +182,41 @@ fn direct_solve(
         .clone();
     let mean = &p.prior().mean;
     let nb = p.prior().n_basis;
+    let rows_of = |psi: &DVector<f64>, j: usize| -> (DVector<f64>, f64) {
+        let block = l.rows(j * nb, nb);
+        (block.tr_mul(psi), psi.dot(&mean.rows(j * nb, nb)))
+    };
+    let limits = robot.limits();
+    let position_rows = |qp: &mut Qp, psi: &DVector<f64>, j: usize| {
+        let (a, c) = rows_of(psi, j);
+        qp.inequalities.push(Inequality {
+            a: a.clone(),
+            b: limits[j].upper - margin - c,
+            penalty: None,
+        });
+        qp.inequalities.push(Inequality {
+            a: -a,
+            b: c - limits[j].lower - margin,
+            penalty: None,
+        });
+    };
+    let mut qp = Qp::new(mean.len());
     let dense = p
         .basis()
         .resampled(req.task.promp.n_samples * req.task.options.verify_factor)
         .unwrap();
-    let mut qp = Qp::new(mean.len());
-    let rows_of = |psi: DVector<f64>, j: usize| -> (DVector<f64>, f64) {
-        let block = l.rows(j * nb, nb);
-        (block.tr_mul(&psi), psi.dot(&mean.rows(j * nb, nb)))
-    };
-    let limits = robot.limits();
-    let sets: Vec<&dpmp::promp::Basis> = if with_dense {
+    let sets: Vec<&dpmp::promp::Basis> = if continuous {
         vec![p.basis(), &dense]
     } else {
         vec![p.basis()]
     };
     for basis in sets {
-        for (i, _) in basis.phases().iter().enumerate() {
+        for i in 0..basis.phases().len() {
             let psi = basis.matrix().row(i).transpose();
             let dpsi = basis.derivative().row(i).transpose() / req.task.duration_s;
             for (j, lim) in limits.iter().enumerate() {
-                let (a, c) = rows_of(psi.clone(), j);
-                qp.inequalities.push(Inequality {
-                    a: a.clone(),
-                    b: lim.upper - margin - c,
-                    penalty: None,
-                });
-                qp.inequalities.push(Inequality {
-                    a: -a,
-                    b: c - lim.lower - margin,
-                    penalty: None,
-                });
-                let (v, cv) = rows_of(dpsi.clone(), j);
+                position_rows(&mut qp, &psi, j);
+                let (v, cv) = rows_of(&dpsi, j);
                 qp.inequalities.push(Inequality {
                     a: v.clone(),
                     b: lim.velocity - cv,
@@ -226,15 +232,66 @@ fn direct_solve(
     }
     let psi0 = p.basis().matrix().row(0).transpose();
     for (j, q0) in req.task.start.as_ref().unwrap().iter().enumerate() {
-        let (a, c) = rows_of(psi0.clone(), j);
+        let (a, c) = rows_of(&psi0, j);
         qp.equalities.push((a, q0 - c));
     }
     let settings = QpSettings {
         tolerance: 1e-10,
         ..QpSettings::default()
     };
-    let sol = qp.solve(&settings).unwrap();
-    mean + &l * sol.z
+    let scan = p.basis().resampled(10_000).unwrap();
+    for _ in 0..8 {
+        let w = mean + &l * qp.solve(&settings).unwrap().z;
+        if !continuous {
+            return w;
+        }
+        let peaks = limit_peaks(&scan, &w, robot, margin);
+        if peaks.is_empty() {
+            return w;
+        }
+        for (i, j) in peaks {
+            position_rows(&mut qp, &scan.matrix().row(i).transpose(), j);
+        }
+    }
+    panic!("the reference's cutting planes did not converge");
+}
+
+/// How far (rad) the reference lets a joint pass its limit between rows:
+/// the verification's feasibility tolerance, which the answer may use too.
+const LIMIT_TOLERANCE: f64 = 1e-6;
+
+/// (phase index, joint) of every local maximum of a joint's excess beyond
+/// its limits (less `margin`) over `scan`'s phases that exceeds
+/// [`LIMIT_TOLERANCE`].
+fn limit_peaks(
+    scan: &dpmp::promp::Basis,
+    w: &DVector<f64>,
+    robot: &Robot,
+    margin: f64,
+) -> Vec<(usize, usize)> {
+    let nb = scan.n_basis();
+    let mut out = Vec::new();
+    for (j, lim) in robot.limits().iter().enumerate() {
+        let wj = w.rows(j * nb, nb);
+        let excess: Vec<f64> = (0..scan.phases().len())
+            .map(|i| {
+                let q = scan.matrix().row(i).transpose().dot(&wj);
+                (q - lim.upper + margin).max(lim.lower + margin - q)
+            })
+            .collect();
+        for i in 0..excess.len() {
+            let left = if i > 0 {
+                excess[i - 1]
+            } else {
+                f64::NEG_INFINITY
+            };
+            let right = excess.get(i + 1).copied().unwrap_or(f64::NEG_INFINITY);
+            if excess[i] > LIMIT_TOLERANCE && excess[i] >= left && excess[i] > right {
+                out.push((i, j));
+            }
+        }
+    }
+    out
 }
 
 #[test]
@@ -255,8 +312,9 @@ fn binding_limit_margins_match_one_clarabel_solve_of_the_whole_qp() {
         assert_eq!(sol.status, Status::Optimal, "prior {k}: {:?}", sol.reason);
         // The optimiser's QP is the one on its optimisation grid; when that
         // optimum breaks a limit between grid phases, dense verification
-        // adds phases and the SCP solves a larger QP, whose rows the
-        // reference then takes at every verification phase (equal in cost;
+        // adds phases (samples and the peaks between them) and the SCP
+        // solves a larger QP, whose rows the reference then takes at 20
+        // times the verification sampling (equal in cost;
         // the trajectories may differ within the 1e-6 verification
         // tolerance, so only the cost is compared).
         let grid = direct_solve(&p, &req, &robot, margin, false);
@@ -274,10 +332,12 @@ fn binding_limit_margins_match_one_clarabel_solve_of_the_whole_qp() {
             sol.mahalanobis.powi(2),
             m_direct.powi(2)
         );
-        // Same QP: 1e-6 rad. Larger QP: the SCP's answer may break rows
-        // it never added by up to the verification tolerance (1e-6), which
-        // moves the optimum along nearly parallel neighbouring rows.
-        let allowed = if exact { 1e-6 } else { 1e-4 };
+        // Same QP: 1e-6 rad. Larger QP: the SCP's answer and the reference
+        // may each pass the limit between their rows by up to the
+        // verification tolerance (1e-6), which moves the optimum along
+        // nearly parallel neighbouring rows (1.0e-4 rad on prior 26 at the
+        // same cost to 1e-7).
+        let allowed = if exact { 1e-6 } else { 3e-4 };
         let worst = max_position_gap(&p, &sol.weights, direct.as_slice());
         assert!(
             worst < allowed,

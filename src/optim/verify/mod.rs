@@ -1,10 +1,13 @@
 //! Dense verification: every constraint evaluated at `verify_factor` times
 //! the optimisation sampling, with real forward kinematics and distances to
 //! the robot's mesh hulls, plus the continuous-motion clearance bound
-//! between the samples ([`crate::optim::verify::continuous`]). The report the user sees
-//! always comes from here.
+//! between the samples ([`crate::optim::verify::continuous`]) and every
+//! joint's peaks and troughs between them against its position limits
+//! ([`crate::optim::verify::limits`]). The report the user sees always
+//! comes from here.
 
 pub mod continuous;
+pub mod limits;
 
 use crate::optim::problem::linear::RATE_BUFFER;
 use crate::optim::problem::phases::Derivative;
@@ -23,7 +26,9 @@ use rayon::prelude::*;
 pub struct Verification {
     /// Figures over the dense phases.
     pub report: TrajectoryReport,
-    /// Dense phases with a violated limit, velocity or clearance.
+    /// Phases with a violated limit, velocity or clearance: dense samples,
+    /// joint peaks between them, and the certificate's uncertified
+    /// intervals (sorted).
     pub flagged: Vec<f64>,
     /// Why the clearance part was not finished (the caller's deadline or
     /// cancel flag): the report then has no clearance figures, a warning
@@ -73,6 +78,7 @@ impl Problem {
         let qd = &self.dense[1] * &wm;
         let mut flagged = vec![false; self.dense_phases.len()];
         let limit = self.limit_violation(&q, &mut flagged);
+        let peaks = self.limit_peaks(&wm, &qd);
         let ratio = self.rate_ratio(Derivative::Velocity, &qd, &mut flagged);
         let mut limited_ratio = |d: Derivative| {
             self.linear.rate_bound(d, 0).map(|_| {
@@ -100,7 +106,7 @@ impl Problem {
             closest,
             continuous_clearance_m: certificate.as_ref().map(|c| c.clearance_m),
             continuous_margin_m: certificate.as_ref().map(|c| c.margin_m),
-            max_joint_limit_violation_rad: limit,
+            max_joint_limit_violation_rad: limit.max(peaks.excess),
             max_velocity_ratio: ratio,
             max_acceleration_ratio: acceleration_ratio,
             max_jerk_ratio: jerk_ratio,
@@ -126,10 +132,11 @@ impl Problem {
             .filter(|(f, _)| **f)
             .map(|(_, p)| *p)
             .collect();
+        flagged.extend(peaks.flagged);
         if let Some(c) = certificate {
             flagged.extend(c.flagged);
-            flagged.sort_by(f64::total_cmp);
         }
+        flagged.sort_by(f64::total_cmp);
         if let Some(why) = interrupted {
             report.min_clearance_m = None;
             report.closest = None;

@@ -1,0 +1,97 @@
+//! Joint position limits between the dense verification samples.
+//!
+//! A joint that rides its limit bulges past it between two samples by up to
+//! `max|q̈| h² / 8` (tens of microradians at the default sampling), which a
+//! check at the samples alone cannot see. Each joint's position is a smooth
+//! function of the time fraction, so its largest value between two samples
+//! is at a sample or at an interior root of its velocity: wherever the
+//! velocity changes sign from positive to negative (a peak) or from
+//! negative to positive (a trough) between two samples, the root is found
+//! by bisection of the velocity (to [`ROOT_TOLERANCE`] in time fraction,
+//! where the position is flat to second order) and the position there is
+//! checked against the limits. Between two samples 1/600 of the motion
+//! apart the velocity changes sign at most once (a reversal and back within
+//! a few milliseconds needs jerks far beyond any arm's).
+//!
+//! The peaks that break a limit are flagged at their own phase, so the
+//! optimiser constrains the peak itself; the next peak lies next to it and
+//! differs from it in the second order.
+
+use crate::optim::problem::Problem;
+use crate::optim::tolerances::FEASIBILITY_TOLERANCE;
+use nalgebra::DMatrix;
+
+/// Width (time fraction) to which a velocity root is bisected.
+pub const ROOT_TOLERANCE: f64 = 1e-12;
+
+/// Bisections of one velocity root at most (the interval halves each time).
+const MAX_BISECTIONS: usize = 60;
+
+/// The joint extrema between dense samples.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct LimitPeaks {
+    /// Largest excess (rad) of an interior extremum beyond its joint's
+    /// limit (0 when none is beyond).
+    pub excess: f64,
+    /// Time fractions of the extrema beyond a limit by more than
+    /// [`FEASIBILITY_TOLERANCE`].
+    pub flagged: Vec<f64>,
+}
+
+impl Problem {
+    /// Every interior extremum of every joint between the dense samples
+    /// against the joint's limits; `wm` is the weight matrix (`n_basis ×
+    /// n_joints`), `qd` the dense velocities.
+    pub(crate) fn limit_peaks(&self, wm: &DMatrix<f64>, qd: &DMatrix<f64>) -> LimitPeaks {
+        let mut out = LimitPeaks::default();
+        let phases = &self.dense_phases;
+        for j in 0..wm.ncols() {
+            for p in 0..phases.len().saturating_sub(1) {
+                let (va, vb) = (qd[(p, j)], qd[(p + 1, j)]);
+                if va * vb >= 0.0 {
+                    continue;
+                }
+                let tau = self.velocity_root(wm, j, phases[p], phases[p + 1], va > 0.0);
+                let q = self.joint_position(wm, j, tau);
+                let excess = (q - self.linear.upper[j]).max(self.linear.lower[j] - q);
+                out.excess = out.excess.max(excess);
+                if excess > FEASIBILITY_TOLERANCE {
+                    out.flagged.push(tau);
+                }
+            }
+        }
+        out.flagged.sort_by(f64::total_cmp);
+        out.flagged.dedup();
+        out
+    }
+
+    /// The root of joint `j`'s velocity between time fractions `lo` and
+    /// `hi`, where it is positive at `lo` when `rising` (negative
+    /// otherwise) and of the other sign at `hi`.
+    fn velocity_root(&self, wm: &DMatrix<f64>, j: usize, lo: f64, hi: f64, rising: bool) -> f64 {
+        let (mut lo, mut hi) = (lo, hi);
+        for _ in 0..MAX_BISECTIONS {
+            if hi - lo <= ROOT_TOLERANCE {
+                break;
+            }
+            let mid = 0.5 * (lo + hi);
+            let v = self.joint_velocity(wm, j, mid);
+            if (v > 0.0) == rising {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        0.5 * (lo + hi)
+    }
+
+    fn joint_position(&self, wm: &DMatrix<f64>, j: usize, tau: f64) -> f64 {
+        let [psi, ..] = self.warp.time_rows(&self.basis, tau, self.duration);
+        psi.dot(&wm.column(j))
+    }
+
+    fn joint_velocity(&self, wm: &DMatrix<f64>, j: usize, tau: f64) -> f64 {
+        let [_, dpsi, ..] = self.warp.time_rows(&self.basis, tau, self.duration);
+        dpsi.dot(&wm.column(j))
+    }
+}
