@@ -62,6 +62,9 @@ pub struct SolveStats {
     pub active_set_steps: usize,
     /// Steps rejected by the merit test.
     pub rejected_steps: usize,
+    /// Second-order corrections tried after a full step failed the merit
+    /// test, and how many of them were accepted.
+    pub corrections: (usize, usize),
     /// Largest QP: rows of the constraint matrix.
     pub max_qp_rows: usize,
     /// Largest QP: variables.
@@ -101,6 +104,8 @@ impl SolveStats {
         self.active_set_solves += later.active_set_solves;
         self.active_set_steps += later.active_set_steps;
         self.rejected_steps += later.rejected_steps;
+        self.corrections.0 += later.corrections.0;
+        self.corrections.1 += later.corrections.1;
         self.max_qp_rows = self.max_qp_rows.max(later.max_qp_rows);
         self.max_qp_variables = self.max_qp_variables.max(later.max_qp_variables);
         self.added_phases += later.added_phases;

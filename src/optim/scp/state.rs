@@ -202,22 +202,9 @@ impl<'a> Scp<'a> {
     /// Step 3: the QP at the iterate, by constraint generation. A failure
     /// is the run's answer.
     fn generate_and_solve(&mut self) -> std::result::Result<Step, Box<Solution>> {
-        let at = Linearisation {
-            exact: self.exact || self.certify,
-            certify: self.certify
-                || self.problem.options.inner_solver == crate::optim::task::InnerSolver::Clarabel,
-            rows: &self.rows,
-            eval: &self.eval,
-            centre: self.centre,
-            rho: self.rho,
-            trust: self.eval.linear_ok.then_some(self.radius),
-            proximal_hint: self.proximal_weight,
-        };
-        let mut qp_ms = 0.0;
-        let p = self.problem;
-        let (hint, ctl, stats) = (&self.hint, self.ctl, &mut self.stats);
-        let outcome = timed(&mut qp_ms, || p.subproblem(&at, hint, ctl, stats));
-        self.stats.qp_ms += qp_ms;
+        let mut stats = std::mem::take(&mut self.stats);
+        let outcome = self.solve_subproblem(None, &mut stats);
+        self.stats = stats;
         match outcome {
             Ok((sol, model_here, active)) => {
                 self.hint = active;
@@ -247,6 +234,34 @@ impl<'a> Scp<'a> {
         }
     }
 
+    /// The QP at the iterate (see [`Problem::subproblem`]), timed into
+    /// `stats`; `correction`: a rejected trial point whose short pairs join
+    /// (the second-order correction).
+    fn solve_subproblem(
+        &self,
+        correction: Option<&GridEval>,
+        stats: &mut SolveStats,
+    ) -> std::result::Result<(QpSolution, f64, ActiveRows), QpFailure> {
+        let at = Linearisation {
+            exact: self.exact || self.certify,
+            certify: self.certify
+                || self.problem.options.inner_solver == crate::optim::task::InnerSolver::Clarabel,
+            rows: &self.rows,
+            eval: &self.eval,
+            centre: self.centre,
+            rho: self.rho,
+            trust: self.eval.linear_ok.then_some(self.radius),
+            proximal_hint: self.proximal_weight,
+            correction,
+        };
+        let mut qp_ms = 0.0;
+        let outcome = timed(&mut qp_ms, || {
+            self.problem.subproblem(&at, &self.hint, self.ctl, stats)
+        });
+        stats.qp_ms += qp_ms;
+        outcome
+    }
+
     /// Step 4: the merit test on the QP's step (with its halvings), then
     /// [`Scp::accept`] or [`Scp::shrink`].
     fn judge(&mut self, step: Step) {
@@ -267,7 +282,21 @@ impl<'a> Scp<'a> {
         } else {
             self.proximal_weight = step.sol.proximal_weight;
         }
-        let (accepted, alpha) = self.problem.line_search(&trial, &mut self.stats);
+        let mut stats = std::mem::take(&mut self.stats);
+        let correct = |rejected: &GridEval, stats: &mut SolveStats| {
+            let solved = self.solve_subproblem(Some(rejected), stats);
+            solved.ok().map(|(sol, _, _)| sol.z)
+        };
+        // The active-set steps from a point inside the limits are
+        // corrected: a step along curved clearance constraints breaks them
+        // by its square, and the L1 merit rejects it although it is a good
+        // step (the Maratos effect). Clarabel's certifying step is judged
+        // as it is.
+        let correction: Option<&Correction> =
+            (!self.certify && self.eval.linear_ok && step.sol.clarabel.is_none())
+                .then_some(&correct);
+        let (accepted, alpha) = self.problem.line_search(&trial, correction, &mut stats);
+        self.stats = stats;
         tracing::debug!(
             iteration = self.stats.iterations,
             rows = step.sol.rows,
@@ -424,6 +453,10 @@ const MAX_ADDED_PER_ROUND: usize = 64;
 /// same statuses; more traded statuses for iterations).
 const LINE_SEARCH_HALVINGS: usize = 2;
 
+/// A second-order correction: the corrected step's end (whitened) for a
+/// rejected trial point, from the QP with that point's short pairs added.
+type Correction<'c> = dyn Fn(&GridEval, &mut SolveStats) -> Option<DVector<f64>> + 'c;
+
 /// One QP step to judge: from `eval` towards `target` (whitened).
 struct StepTrial<'a> {
     eval: &'a GridEval,
@@ -450,6 +483,7 @@ impl Problem {
     fn line_search(
         &self,
         trial: &StepTrial,
+        correction: Option<&Correction>,
         stats: &mut SolveStats,
     ) -> (Option<(GridEval, f64, f64)>, f64) {
         let StepTrial {
@@ -487,6 +521,24 @@ impl Problem {
             let actual = merit_here - next.merit(rho);
             if !eval.linear_ok || actual >= 0.1 * predicted.max(0.0) - 1e-12 * scale {
                 return (Some((next, predicted, actual)), alpha);
+            }
+            if attempt > 0 {
+                continue;
+            }
+            let Some(z) = correction.and_then(|correct| correct(&next, stats)) else {
+                continue;
+            };
+            stats.corrections.0 += 1;
+            let corrected = timed(&mut stats.evaluation_ms, || {
+                self.evaluate_grid(rows, z, centre, ctl)
+            });
+            if corrected.interrupted {
+                return (None, alpha);
+            }
+            let actual = merit_here - corrected.merit(rho);
+            if actual >= 0.1 * predicted.max(0.0) - 1e-12 * scale {
+                stats.corrections.1 += 1;
+                return (Some((corrected, predicted, actual)), alpha);
             }
         }
         (None, alpha)

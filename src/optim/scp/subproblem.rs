@@ -40,9 +40,11 @@ impl Problem {
         stats: &mut SolveStats,
     ) -> std::result::Result<(QpSolution, f64, ActiveRows), QpFailure> {
         let target = self.clearance_m + CLEARANCE_BUFFER_M;
-        let clearance = self.clearance_rows(at.rows, at.eval, target, at.rho);
+        let mut clearance = self.clearance_rows(at.rows, at.eval, target, at.rho);
         let mut model_slack: f64 = clearance.iter().map(|c| c.shortfall).sum();
+        let corrections = self.correction_rows(at, target, &mut clearance);
         let mut work = WorkingQp::new(self.base_qp(at), &clearance);
+        work.add_clearance(&corrections);
         if let Some((cone, excess)) = self.goal_cone(at.eval, at.rho) {
             work.qp.cones.push(cone);
             model_slack += excess;
@@ -110,6 +112,47 @@ impl Problem {
             self.add_linear_rows(&mut work, at.rows, &w, linear_missing);
             work.add_clearance(&thin_violated(&clearance, &violated));
         }
+    }
+
+    /// The second-order correction's rows (see [`Linearisation::correction`]):
+    /// every pair of the rejected trial point short of `target`, linearised
+    /// there, appended to `clearance`; returns their indices. They add
+    /// nothing to the model's value at the iterate (the step is judged
+    /// against the prediction of the QP it corrects).
+    fn correction_rows(
+        &self,
+        at: &Linearisation,
+        target: f64,
+        clearance: &mut Vec<ClearanceRow>,
+    ) -> Vec<usize> {
+        let Some(trial) = at.correction else {
+            return Vec::new();
+        };
+        let short: Vec<ClearanceRow> = self
+            .clearance_rows(at.rows, trial, target, at.rho)
+            .into_iter()
+            .filter(|c| c.shortfall > 0.0)
+            .collect();
+        let candidates: Vec<Candidate<(usize, usize)>> = short
+            .iter()
+            .map(|c| Candidate {
+                key: c.key,
+                phase: c.phase,
+                score: c.shortfall,
+                in_band: true,
+            })
+            .collect();
+        let start = clearance.len();
+        let mut short: Vec<Option<ClearanceRow>> = short.into_iter().map(Some).collect();
+        for k in thin_in_time(&candidates) {
+            if let Some(c) = short[k].take() {
+                clearance.push(ClearanceRow {
+                    shortfall: 0.0,
+                    ..c
+                });
+            }
+        }
+        (start..clearance.len()).collect()
     }
 
     /// The QP's cost centre, equalities, opt-in weight bounds and trust
@@ -500,6 +543,11 @@ pub(in crate::optim) struct Linearisation<'a> {
     /// The trust ball's multiplier of the previous active-set QP: where
     /// this one's search starts.
     pub(in crate::optim) proximal_hint: f64,
+    /// A second-order correction: the trial point of this linearisation's
+    /// rejected step. Its pairs short of the target join the QP linearised
+    /// where they were measured, so the corrected step bends around the
+    /// curvature the first step's rows could not see (Maratos effect).
+    pub(in crate::optim) correction: Option<&'a GridEval>,
 }
 
 #[cfg(test)]
@@ -554,6 +602,7 @@ mod tests {
                 rho: 1e3,
                 trust: Some(2.0),
                 proximal_hint: 0.0,
+                correction: None,
             };
             let mut stats = SolveStats::default();
             let (sol, _, _) = p
