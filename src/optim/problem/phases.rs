@@ -245,6 +245,22 @@ impl PhaseRows {
         DMatrix::from_fn(self.n_joints, n, |j, c| pos[p * self.n_joints + j][c])
     }
 
+    /// `∂q/∂z · z` at phase index `p`: the joint positions' part linear in
+    /// the whitened weights `z` (the positions less the prior mean's).
+    pub fn linear_position(&self, p: usize, z: &DVector<f64>) -> DVector<f64> {
+        DVector::from_fn(self.n_joints, |j, _| self.position_row(p, j).dot(z))
+    }
+
+    /// `(∂q/∂z)ᵀ g` at phase index `p`: a joint-space gradient `g` (one
+    /// entry per joint) as a gradient over the whitened weights.
+    pub fn position_gradient(&self, p: usize, g: &DVector<f64>) -> DVector<f64> {
+        let mut out = DVector::zeros(self.position_row(p, 0).len());
+        for (j, gj) in g.iter().enumerate() {
+            out.axpy(*gj, self.position_row(p, j), 1.0);
+        }
+        out
+    }
+
     /// Joint positions at phase index `p` for weights `w`.
     pub fn position(&self, p: usize, w: &DVector<f64>) -> Vec<f64> {
         self.values(Derivative::Position, p, w)

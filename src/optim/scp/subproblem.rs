@@ -43,7 +43,7 @@ impl Problem {
         let mut clearance = self.clearance_rows(at.rows, at.eval, target, at.rho);
         let mut model_slack: f64 = clearance.iter().map(|c| c.shortfall).sum();
         let corrections = self.correction_rows(at, target, &mut clearance);
-        let mut work = WorkingQp::new(self.base_qp(at), &clearance);
+        let mut work = WorkingQp::new(self.base_qp(at), &clearance, at.rows);
         work.add_clearance(&corrections);
         if let Some((cone, excess)) = self.goal_cone(at.eval, at.rho) {
             work.qp.cones.push(cone);
@@ -208,7 +208,9 @@ impl Problem {
     }
 
     /// Every clearance pair of `eval` linearised at its iterate:
-    /// `d + ∇d·(z - z_k) >= target`, with an L1-penalised slack.
+    /// `d + ∇d·(z - z_k) >= target`, with an L1-penalised slack. Each row
+    /// is kept in joint space (`∇_q d` at its phase); its whitened form is
+    /// built only when it joins the QP ([`ClearanceRow::inequality`]).
     fn clearance_rows(
         &self,
         rows: &PhaseRows,
@@ -219,23 +221,20 @@ impl Problem {
         eval.pairs
             .iter()
             .flat_map(|pp| {
-                let jac = rows.position_jacobian(pp.phase);
+                let qz = rows.linear_position(pp.phase, &eval.z);
                 pp.list.iter().map(move |c| {
-                    let g = self
+                    let gradient = self
                         .scene
                         .clearance_gradient(&self.robot, &pp.q, &pp.frames, c);
-                    let a = jac.tr_mul(&g);
                     ClearanceRow {
                         phase_index: pp.phase,
                         key: (c.shape, c.obstacle),
                         phase: pp.phase_value,
                         distance: c.distance,
                         shortfall: (target - c.distance).max(0.0),
-                        row: Inequality {
-                            b: c.distance - a.dot(&eval.z) - target,
-                            a: -a,
-                            penalty: Some(rho),
-                        },
+                        b: c.distance - gradient.dot(&qz) - target,
+                        gradient,
+                        penalty: rho,
                     }
                 })
             })
@@ -344,7 +343,8 @@ impl Problem {
 }
 
 /// A linearised clearance row of one (robot shape, obstacle) pair at one
-/// optimisation phase.
+/// optimisation phase, `-∇_q d · J_p z <= b` (with an L1-penalised slack),
+/// `J_p` the phase's joint positions' Jacobian in the whitened weights.
 struct ClearanceRow {
     /// Index of the phase in the optimisation set.
     phase_index: usize,
@@ -355,7 +355,11 @@ struct ClearanceRow {
     distance: f64,
     /// `max(0, target - distance)`: the row's slack at that iterate.
     shortfall: f64,
-    row: Inequality,
+    /// `∂d/∂q` at the iterate (one entry per joint).
+    gradient: DVector<f64>,
+    /// `d - ∇_q d · J_p z_k - target`.
+    b: f64,
+    penalty: f64,
 }
 
 impl ClearanceRow {
@@ -365,9 +369,19 @@ impl ClearanceRow {
         (self.phase_index, self.key.0, self.key.1)
     }
 
-    /// How far `z` breaks the linearised row without slack (> 0: violated).
-    fn violation(&self, z: &DVector<f64>) -> f64 {
-        self.row.a.dot(z) - self.row.b
+    /// How far `z` breaks the linearised row without slack (> 0: violated),
+    /// given `J_p z` at the row's phase.
+    fn violation(&self, qz: &DVector<f64>) -> f64 {
+        -self.gradient.dot(qz) - self.b
+    }
+
+    /// The row over the whitened weights.
+    fn inequality(&self, rows: &PhaseRows) -> Inequality {
+        Inequality {
+            a: -rows.position_gradient(self.phase_index, &self.gradient),
+            b: self.b,
+            penalty: Some(self.penalty),
+        }
     }
 }
 
@@ -380,18 +394,21 @@ struct WorkingQp<'c> {
     linear_in: HashSet<RowRef>,
     /// Every clearance row of the linearisation (the candidates).
     clearance: &'c [ClearanceRow],
+    /// The optimisation phases the clearance rows are taken at.
+    rows: &'c PhaseRows,
     /// Which of `clearance` are in the QP.
     clearance_in: Vec<bool>,
 }
 
 impl<'c> WorkingQp<'c> {
     /// `qp`'s own inequalities count as [`RowId::Other`].
-    fn new(qp: Qp, clearance: &'c [ClearanceRow]) -> Self {
+    fn new(qp: Qp, clearance: &'c [ClearanceRow], rows: &'c PhaseRows) -> Self {
         WorkingQp {
             ids: vec![RowId::Other; qp.inequalities.len()],
             qp,
             linear_in: HashSet::new(),
             clearance,
+            rows,
             clearance_in: vec![false; clearance.len()],
         }
     }
@@ -401,7 +418,9 @@ impl<'c> WorkingQp<'c> {
         for &i in chosen {
             if !self.clearance_in[i] {
                 self.clearance_in[i] = true;
-                self.qp.inequalities.push(self.clearance[i].row.clone());
+                self.qp
+                    .inequalities
+                    .push(self.clearance[i].inequality(self.rows));
                 self.ids.push(RowId::Clearance(i));
             }
         }
@@ -410,9 +429,15 @@ impl<'c> WorkingQp<'c> {
     /// (index, violation) of the candidate clearance rows outside the QP
     /// that `z` breaks.
     fn violated_clearance(&self, z: &DVector<f64>) -> Vec<(usize, f64)> {
+        let mut qz: Vec<Option<DVector<f64>>> = vec![None; self.rows.len()];
         (0..self.clearance.len())
             .filter(|&i| !self.clearance_in[i])
-            .map(|i| (i, self.clearance[i].violation(z)))
+            .map(|i| {
+                let row = &self.clearance[i];
+                let q = qz[row.phase_index]
+                    .get_or_insert_with(|| self.rows.linear_position(row.phase_index, z));
+                (i, row.violation(q))
+            })
             .filter(|&(_, v)| v > GENERATION_TOLERANCE)
             .collect()
     }
@@ -571,7 +596,7 @@ mod tests {
         qp.inequalities.extend(
             p.clearance_rows(at.rows, at.eval, target, at.rho)
                 .into_iter()
-                .map(|c| c.row),
+                .map(|c| c.inequality(at.rows)),
         );
         if let Some((cone, _)) = p.goal_cone(at.eval, at.rho) {
             qp.cones.push(cone);
