@@ -175,8 +175,9 @@ fn default_tolerance() -> f64 {
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct SolverOptions {
-    /// Whitening regularisation `λ` in `Σ + λI` (default: 1e-6 x the mean
-    /// prior variance).
+    /// Whitening regularisation `λ` in `Σ + λI` (default: 0 for a
+    /// well-conditioned prior, else 1e-6 x the mean prior variance; see
+    /// [`Whitening::default_lambda`](crate::optim::problem::whiten::Whitening::default_lambda)).
     pub lambda: Option<f64>,
     /// Largest number of SCP iterations (QPs).
     pub max_iterations: usize,

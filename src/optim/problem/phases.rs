@@ -341,6 +341,34 @@ mod tests {
 }
 
 #[cfg(test)]
+mod jacobian_tests {
+    use super::*;
+    use crate::fixtures::example_distribution;
+    use crate::promp::PrompConfig;
+
+    /// `linear_position` is `J z` and `position_gradient` is `Jᵀ g` for the
+    /// phase's position Jacobian `J`, built independently as a matrix.
+    #[test]
+    fn the_position_products_match_the_jacobian() {
+        let basis = Basis::new(&PrompConfig::default()).unwrap();
+        let dist = example_distribution(&basis, 20, 5).unwrap();
+        let wh = Whitening::new(&dist, Whitening::default_lambda(&dist)).unwrap();
+        let phases = [0.0, 0.27, 0.8];
+        let rows = PhaseRows::new(&basis, &wh, 7, (4.0, TimeWarp::MinimumJerk), &phases);
+        let z = DVector::from_fn(wh.dim(), |i, _| (i as f64 * 0.61).cos());
+        let g = DVector::from_fn(7, |j, _| j as f64 - 2.5);
+        for p in 0..phases.len() {
+            let jac = rows.position_jacobian(p);
+            let (jz, jtg) = (&jac * &z, jac.tr_mul(&g));
+            let qz = rows.linear_position(p, &z);
+            let grad = rows.position_gradient(p, &g);
+            assert!((qz - &jz).amax() < 1e-12 * (1.0 + jz.amax()));
+            assert!((grad - &jtg).amax() < 1e-12 * (1.0 + jtg.amax()));
+        }
+    }
+}
+
+#[cfg(test)]
 mod warp_tests {
     use super::*;
 

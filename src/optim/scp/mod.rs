@@ -14,8 +14,11 @@
 //! is judged against is then the working set's. A step is accepted when the
 //! true merit `|z - c|² + ρ·violation` (real FK and parry distances, every
 //! pair at every phase) improves by at least 10 % of the model's
-//! prediction; otherwise up to two halvings of the step are tried (an
-//! evaluation is much cheaper than a QP) before the trust region shrinks.
+//! prediction; otherwise a second-order correction is tried (the QP again
+//! with the rejected point's short pairs linearised where they were
+//! measured: a step along curved clearance rows breaks them by its square),
+//! then up to two halvings of the step (an evaluation is much cheaper than
+//! a QP) before the trust region shrinks.
 //! When the iteration stalls short of feasibility, generation becomes exact
 //! (every violated clearance row joins the QP), and only a stall on that
 //! full model raises the penalty (each switch resets the trust region to at

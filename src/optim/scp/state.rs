@@ -474,12 +474,15 @@ struct StepTrial<'a> {
 
 impl Problem {
     /// The step of an SCP iteration, judged on the true merit: the QP's
-    /// solution if it achieves at least 10 % of the predicted decrease, else
-    /// up to [`LINE_SEARCH_HALVINGS`] halvings of it (each predicted to
-    /// achieve at least its fraction of the decrease: the model is convex),
-    /// which are cheaper than another QP on a smaller trust region. Returns
-    /// the accepted iterate with its predicted and actual decrease, and the
-    /// step fraction tried last.
+    /// solution if it achieves at least 10 % of the predicted decrease;
+    /// else, with a `correction`, the second-order corrected point judged
+    /// against the same prediction (one more QP and evaluation, counted in
+    /// [`SolveStats::corrections`]); else up to [`LINE_SEARCH_HALVINGS`]
+    /// halvings of the step (each predicted to achieve at least its
+    /// fraction of the decrease: the model is convex), which are cheaper
+    /// than another QP on a smaller trust region. Returns the accepted
+    /// iterate with its predicted and actual decrease, and the step
+    /// fraction tried last (1 for the corrected point).
     fn line_search(
         &self,
         trial: &StepTrial,
