@@ -11,7 +11,8 @@
 //! evaluation, dense verification). `DPMP_BENCH_SET=typical|hard` runs one
 //! set; `DPMP_BENCH_LIMIT=N` the first N problems of each;
 //! `DPMP_BENCH_PER_PROBLEM=FILE` writes one CSV row per problem (set, name,
-//! status, solved, ms, iterations, restarts) for the time-vs-success plot.
+//! status, solved, ms, iterations, restarts) for the time-vs-success plot
+//! (`scripts/plot_sets.py FILE OUT.svg`).
 
 use dpmp::bench::{load_dir, ProblemFile};
 use dpmp::fixtures::{typical_request, ExampleSettings};
