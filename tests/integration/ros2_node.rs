@@ -39,10 +39,16 @@ const DEADLINE_S: f64 = 60.0;
 const SETTLE: Duration = Duration::from_millis(300);
 
 /// A domain of this test run's own, away from ROS's default 0; one per
-/// test (`test` 0 or 1), as they run at once.
+/// test (`test` 0 or 1), as they run at once. Domains 1-100 keep every
+/// RTPS port (`7400 + 250 d + …`) below Linux's ephemeral range (32768 and
+/// up), where another socket of the busy test process could hold one.
 fn domain(test: u16) -> u16 {
-    100 + 2 * (std::process::id() % 50) as u16 + test
+    1 + 2 * (std::process::id() % 50) as u16 + test
 }
+
+/// How long the cells wait for DDS discovery: generous, because the whole
+/// suite shares two cores while these tests run.
+const DISCOVERY: Duration = Duration::from_secs(90);
 
 /// The test side's runtime (one thread: the cell's loop).
 fn runtime() -> tokio::runtime::Runtime {
@@ -222,7 +228,7 @@ fn the_node_plans_what_v1_plan_plans_and_survives_bad_messages() {
             .node_mut()
             .create_publisher(&garbage_topic, None)
             .unwrap();
-        cell.wait_for_node(Duration::from_secs(30)).await.unwrap();
+        cell.wait_for_node(DISCOVERY).await.unwrap();
         let good = &scene.frame;
 
         // A good target: the trajectory /v1/plan gives, in the budget.
@@ -374,11 +380,8 @@ fn only_optimal_answers_reach_the_controller_action() {
         let mut hasty_cell = Cell::new(&hasty).unwrap();
         let mut cell = Cell::new(&picker).unwrap();
         let server = controller(&mut cell);
-        cell.wait_for_node(Duration::from_secs(30)).await.unwrap();
-        hasty_cell
-            .wait_for_node(Duration::from_secs(30))
-            .await
-            .unwrap();
+        cell.wait_for_node(DISCOVERY).await.unwrap();
+        hasty_cell.wait_for_node(DISCOVERY).await.unwrap();
         let frame = &scene.frame;
 
         hasty_cell

@@ -124,3 +124,49 @@ impl Problem {
         dpsi.dot(&wm.column(j))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use crate::fixtures::{typical_request, ExampleSettings};
+    use crate::robot::Robot;
+
+    /// Every velocity reversal between the dense samples of a typical
+    /// prior mean: the root found is the one a 60-step bisection finds.
+    #[test]
+    fn velocity_roots_match_bisection() {
+        let robot = Robot::panda().unwrap();
+        let p = typical_request(&robot, 3, &ExampleSettings::default())
+            .unwrap()
+            .validate(&robot)
+            .unwrap();
+        let wm = p.weight_matrix(&p.prior.mean);
+        let qd = &p.dense[1] * &wm;
+        let mut reversals = 0;
+        for j in 0..wm.ncols() {
+            for k in 0..p.dense_phases.len() - 1 {
+                let (va, vb) = (qd[(k, j)], qd[(k + 1, j)]);
+                if va * vb >= 0.0 {
+                    continue;
+                }
+                reversals += 1;
+                let (lo, hi) = (p.dense_phases[k], p.dense_phases[k + 1]);
+                let root = p.velocity_root(&wm, j, lo, hi, va > 0.0);
+                let (mut a, mut b) = (lo, hi);
+                for _ in 0..60 {
+                    let mid = 0.5 * (a + b);
+                    if (p.joint_velocity(&wm, j, mid) > 0.0) == (va > 0.0) {
+                        a = mid;
+                    } else {
+                        b = mid;
+                    }
+                }
+                assert!(
+                    (root - 0.5 * (a + b)).abs() < 1e-10,
+                    "joint {j}: {root} vs {}",
+                    0.5 * (a + b)
+                );
+            }
+        }
+        assert!(reversals >= 3, "only {reversals} velocity reversals");
+    }
+}
