@@ -338,13 +338,6 @@ mod tests {
         let q_end = rows.position(2, &w0);
         assert!((q_end[3] - mean[(149, 3)]).abs() < 1e-9);
     }
-}
-
-#[cfg(test)]
-mod jacobian_tests {
-    use super::*;
-    use crate::fixtures::example_distribution;
-    use crate::promp::PrompConfig;
 
     /// `linear_position` is `J z` and `position_gradient` is `Jᵀ g` for the
     /// phase's position Jacobian `J`, built independently as a matrix.
