@@ -120,25 +120,47 @@ impl<'a> Scp<'a> {
     /// Iterate until a step returns the answer.
     pub(in crate::optim) fn run(mut self) -> Result<Solution> {
         loop {
-            if let Some(done) = self.finish_or_certify() {
+            if let Some(done) = self.advance(usize::MAX) {
                 return Ok(done);
+            }
+        }
+    }
+
+    /// Iterate until a step returns the answer (`Some`), or pause (`None`)
+    /// once the run has taken `iterations` QP iterations in all; a paused
+    /// run goes on where it stopped at the next call. The pause falls
+    /// between two iterations, after a converged iterate was verified, so
+    /// that pausing never changes the run: the same iterations in the same
+    /// order, however they are split between calls.
+    pub(in crate::optim) fn advance(&mut self, iterations: usize) -> Flow {
+        loop {
+            if let Some(done) = self.finish_or_certify() {
+                return Some(done);
+            }
+            if self.stats.iterations >= iterations {
+                return None;
             }
             // `converged` describes the step about to be taken, not the
             // last one (a run starting at its centre begins converged).
             self.converged = false;
             if let Some(done) = self.out_of_budget() {
-                return Ok(done);
+                return Some(done);
             }
             let step = match self.generate_and_solve() {
                 Ok(step) => step,
-                Err(done) => return Ok(*done),
+                Err(done) => return Some(*done),
             };
             self.stats.iterations += 1;
             self.judge(step);
             if let Some(done) = self.stall() {
-                return Ok(done);
+                return Some(done);
             }
         }
+    }
+
+    /// The counters of the work done so far.
+    pub(in crate::optim) fn stats(&self) -> &SolveStats {
+        &self.stats
     }
 
     /// Step 1: a converged feasible iterate is certified by Clarabel, then

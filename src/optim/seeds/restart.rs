@@ -11,11 +11,20 @@
 //! minimising the distance to the prior mean: first from detours around the
 //! obstacles that block the mean (the prior conditioned to pass each on its
 //! near or far side, [`super::detour`]), then from draws `z ~ N(0, I)` of
-//! the whitened prior (seeded by `options.seed`) to make up the number. The restarts run in
-//! parallel and the answer is the closest `optimal` one (lowest cost, ties
-//! to the lower index), so it is the same whatever the thread count and
-//! whichever run finishes first. That answer is a local optimum found from
-//! a draw: a warning says so.
+//! the whitened prior (seeded by `options.seed`) to make up the number.
+//!
+//! The restarts race ([`Problem::race`]): they advance together in rounds
+//! of [`RACE_ROUND`] iterations, in parallel within a round, and the race
+//! ends with the first round in which one of them ends `optimal`. The
+//! answer is the closest (lowest cost, ties to the lower index) of the
+//! runs that ended `optimal` by then. A run's iterations do not depend on
+//! when it was paused, and which runs have ended after a round depends only
+//! on their iteration counts, so the answer is the same whatever the thread
+//! count and whichever run finishes first. The restarts that succeed mostly
+//! end within 6-25 iterations while the others run to their cap, so
+//! stopping those early is most of what the race saves (docs/experiments.md).
+//! The answer is a local optimum found from a detour or a draw: a warning
+//! says so.
 //!
 //! A restart may take at most [`RESTART_MAX_ITERATIONS`] iterations (the
 //! successful restarts on the typical problems mostly need 7-35), so that a
@@ -28,6 +37,7 @@
 
 use crate::optim::problem::Problem;
 use crate::optim::report::Status;
+use crate::optim::scp::Scp;
 use crate::optim::solution::{Solution, SolveControl, SolveStats};
 use crate::Result;
 use nalgebra::DVector;
@@ -65,19 +75,21 @@ impl Problem {
         let mean = DVector::zeros(self.whitening.dim());
         let cap = self.options.max_iterations.min(RESTART_MAX_ITERATIONS);
         let began = std::time::Instant::now();
-        let runs: Vec<Solution> = starts
-            .par_iter()
-            .map(|start| self.run(start, &mean, cap, ctl))
-            .collect::<Result<_>>()?;
+        let race = self.race(&starts, &mean, cap, ctl);
         let mut spent = Spent::from(&first);
         spent.solve_ms += began.elapsed().as_secs_f64() * 1e3;
-        for run in &runs {
-            spent.add(run);
+        for stats in &race.unfinished {
+            spent.add(stats);
+        }
+        for run in race.finished.iter().flatten() {
+            spent.add(&run.stats);
         }
         let stopped = ctl.stop_reason();
-        let best = runs
+        let best = race
+            .finished
             .into_iter()
             .enumerate()
+            .filter_map(|(k, run)| run.map(|r| (k, r)))
             .filter(|(_, r)| r.status == Status::Optimal)
             .min_by(|(i, a), (j, b)| a.mahalanobis.total_cmp(&b.mahalanobis).then(i.cmp(j)));
         match (best, stopped) {
@@ -102,6 +114,55 @@ impl Problem {
         }
     }
 
+    /// The runs from `starts` towards `centre` (each of at most `cap`
+    /// iterations), advanced together in rounds of [`RACE_ROUND`]
+    /// iterations each (in parallel within a round) until the end of the
+    /// first round in which one of them is `optimal`, or until every run
+    /// has ended. Which runs have finished after a round depends only on
+    /// their iteration counts, so the outcome is the same whatever the
+    /// thread count.
+    fn race(
+        &self,
+        starts: &[DVector<f64>],
+        centre: &DVector<f64>,
+        cap: usize,
+        ctl: &SolveControl,
+    ) -> Race {
+        let mut lanes: Vec<Lane> = starts
+            .par_iter()
+            .map(|start| Lane::Running(Box::new(Scp::new(self, start, centre, cap, ctl))))
+            .collect();
+        let mut round = 0;
+        while lanes.iter().any(|l| matches!(l, Lane::Running(_)))
+            && !lanes
+                .iter()
+                .any(|l| matches!(l, Lane::Finished(s) if s.status == Status::Optimal))
+        {
+            round += RACE_ROUND;
+            lanes.par_iter_mut().for_each(|lane| {
+                if let Lane::Running(scp) = lane {
+                    if let Some(done) = scp.advance(round) {
+                        *lane = Lane::Finished(Box::new(done));
+                    }
+                }
+            });
+        }
+        let mut race = Race {
+            finished: Vec::with_capacity(lanes.len()),
+            unfinished: Vec::new(),
+        };
+        for lane in lanes {
+            match lane {
+                Lane::Running(scp) => {
+                    race.unfinished.push(scp.stats().clone());
+                    race.finished.push(None);
+                }
+                Lane::Finished(sol) => race.finished.push(Some(*sol)),
+            }
+        }
+        race
+    }
+
     /// The `n` restart starts: the detours around the obstacles that block
     /// the prior mean ([`Problem::detour_starts`]), then draws to make up
     /// the number.
@@ -122,6 +183,27 @@ impl Problem {
     }
 }
 
+/// Iterations each restart takes per round of [`Problem::race`]: small
+/// enough that the runs still going when one ends `optimal` have not spent
+/// much more, large enough that a round's parallel work is not dominated
+/// by its slowest run's single iteration.
+const RACE_ROUND: usize = 5;
+
+/// One restart in [`Problem::race`].
+enum Lane<'a> {
+    Running(Box<Scp<'a>>),
+    Finished(Box<Solution>),
+}
+
+/// What [`Problem::race`] ended with.
+struct Race {
+    /// Each run's answer by start index; `None` for a run stopped when
+    /// another ended `optimal`.
+    finished: Vec<Option<Solution>>,
+    /// The counters of the stopped runs.
+    unfinished: Vec<SolveStats>,
+}
+
 /// Counters of every run of one solve, and its wall time (the restarts
 /// overlap, so their times do not add up).
 struct Spent {
@@ -137,8 +219,8 @@ impl Spent {
         }
     }
 
-    fn add(&mut self, restart: &Solution) {
-        self.stats.absorb(&restart.stats);
+    fn add(&mut self, restart: &SolveStats) {
+        self.stats.absorb(restart);
         self.stats.restarts += 1;
     }
 
@@ -200,5 +282,85 @@ mod tests {
             (&z_run - &z_best).amax()
         );
         assert!((run.mahalanobis - best.mahalanobis).abs() < 1e-6);
+    }
+
+    /// Pausing a run between iterations (as the race does) never changes
+    /// it: the same weights, bit for bit, and the same iteration count as
+    /// one uninterrupted run.
+    #[test]
+    fn a_run_paused_after_every_iteration_is_the_uninterrupted_run() {
+        let robot = Robot::panda().unwrap();
+        let req = typical_request(&robot, 7, &ExampleSettings::default()).unwrap();
+        let p = req.validate(&robot).unwrap();
+        let ctl = SolveControl::default();
+        let zero = DVector::zeros(p.whitening.dim());
+        let whole = p.run(&zero, &zero, 100, &ctl).unwrap();
+        assert!(whole.stats.iterations >= 3, "{}", whole.stats.iterations);
+        let mut scp = Scp::new(&p, &zero, &zero, 100, &ctl);
+        let mut pauses = 0;
+        let paused = loop {
+            if let Some(done) = scp.advance(scp.stats().iterations + 1) {
+                break done;
+            }
+            pauses += 1;
+        };
+        assert!(pauses >= whole.stats.iterations - 1, "{pauses}");
+        assert_eq!(paused.status, whole.status);
+        assert_eq!(paused.weights, whole.weights);
+        assert_eq!(paused.stats.iterations, whole.stats.iterations);
+    }
+
+    /// The race's answer, checked against every restart run to its own
+    /// end: of the runs that end `optimal` in the earliest round (of
+    /// [`RACE_ROUND`] iterations) in which any does, the lowest cost, ties
+    /// to the lower index.
+    #[test]
+    fn the_race_answers_with_the_closest_of_the_first_runs_to_end_optimal() {
+        let robot = Robot::panda().unwrap();
+        let settings = ExampleSettings {
+            boundary: crate::optim::Boundary::Free,
+            ..Default::default()
+        };
+        // Typical problem 400 on free ends needs its restarts.
+        let req = typical_request(&robot, 400, &settings).unwrap();
+        let p = req.validate(&robot).unwrap();
+        let ctl = SolveControl::default();
+        let starts = p.restart_starts(p.options.restarts, &ctl);
+        assert!(starts.len() >= 2);
+        let mean = DVector::zeros(p.whitening.dim());
+        let cap = p.options.max_iterations.min(RESTART_MAX_ITERATIONS);
+        let full: Vec<Solution> = starts
+            .iter()
+            .map(|s| p.run(s, &mean, cap, &ctl).unwrap())
+            .collect();
+        let round_of = |s: &Solution| s.stats.iterations.max(1).div_ceil(RACE_ROUND);
+        let first_round = full
+            .iter()
+            .filter(|s| s.status == Status::Optimal)
+            .map(round_of)
+            .min()
+            .expect("a restart of problem 400 ends optimal");
+        let expected = full
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| s.status == Status::Optimal && round_of(s) == first_round)
+            .min_by(|(i, a), (j, b)| a.mahalanobis.total_cmp(&b.mahalanobis).then(i.cmp(j)))
+            .map(|(k, _)| k)
+            .unwrap();
+        let answer = p.solve(&ctl).unwrap();
+        assert_eq!(answer.status, Status::Optimal);
+        assert_eq!(answer.weights, full[expected].weights);
+        let race = p.race(&starts, &mean, cap, &ctl);
+        let picked = race.finished[expected].as_ref().expect("the pick finished");
+        assert_eq!(picked.weights, full[expected].weights);
+        for (k, run) in race.finished.iter().enumerate() {
+            match run {
+                Some(run) => assert_eq!(run.weights, full[k].weights, "restart {k}"),
+                None => assert!(round_of(&full[k]) > first_round, "restart {k}"),
+            }
+        }
+        let stopped = race.finished.iter().filter(|r| r.is_none()).count();
+        assert!(stopped >= 1, "the race must stop a restart early");
+        assert_eq!(race.unfinished.len(), stopped);
     }
 }
