@@ -31,6 +31,7 @@ pub mod hull_query;
 pub mod hull_topology;
 pub mod ik;
 pub mod jacobian;
+pub mod lever;
 pub mod limits_file;
 pub mod mesh;
 pub mod mesh_files;
@@ -42,7 +43,7 @@ pub use ik::{IkOptions, IkSolution, IkTarget};
 pub use mesh_files::MeshFiles;
 
 use crate::{Error, Result};
-use chain::{ChainStep, Motion};
+use chain::ChainStep;
 use serde::Serialize;
 
 /// The shipped Panda description (see the comment at its top).
@@ -145,6 +146,9 @@ pub struct Robot {
     /// collision geometry moves per unit of that joint (m/rad; 1 for a
     /// prismatic joint). See [`Robot::lever_arms`].
     pub(crate) lever_arms: Vec<f64>,
+    /// Per link: how far its collision geometry reaches from the link's
+    /// frame origin (m; 0 for a link without geometry).
+    pub(crate) link_reach: Vec<f64>,
 }
 
 /// A robot model's identity: its name, chain and joints, and the SHA-256
@@ -264,17 +268,6 @@ impl Robot {
         &self.warnings
     }
 
-    /// Per actuated joint, an upper bound (m/rad) on the speed of any point
-    /// of the collision geometry per unit joint speed, valid in every
-    /// configuration: a point `p` carried by revolute joint `j` moves at
-    /// `|q̇_j| · dist(p, axis_j) ≤ |q̇_j| · |p − o_j|`, and `|p − o_j|` is at
-    /// most the summed lengths of the fixed joint offsets from `o_j` to
-    /// `p`'s link (plus prismatic travel) plus the link geometry's reach
-    /// from its frame origin (triangle inequality). Prismatic joints: 1.
-    pub fn lever_arms(&self) -> &[f64] {
-        &self.lever_arms
-    }
-
     /// For every mesh shape: its link, the mesh's triangle count and open
     /// edges, the hull's vertex count, and [`hull::tightness`] at `spacing`.
     pub fn hull_tightness(&self, spacing: f64) -> Vec<serde_json::Value> {
@@ -294,32 +287,6 @@ impl Robot {
                 _ => None,
             })
             .collect()
-    }
-
-    /// Compute [`Robot::lever_arms`] from the chain and the shapes.
-    pub(crate) fn with_lever_arms(mut self) -> Robot {
-        let n_links = self.link_names.len();
-        let mut reach = vec![0.0f64; n_links];
-        for s in &self.shapes {
-            reach[s.link] = reach[s.link].max(s.geometry.reach_from(&[0.0; 3]));
-        }
-        self.lever_arms = self
-            .dof_step
-            .iter()
-            .map(|&step| match self.steps[step].motion {
-                Motion::Prismatic { .. } => 1.0,
-                _ => {
-                    let mut chain = 0.0;
-                    let mut best: f64 = reach[step + 1];
-                    for k in step + 1..self.steps.len() {
-                        chain += step_length(&self.steps[k], &self.limits);
-                        best = best.max(chain + reach[k + 1]);
-                    }
-                    best
-                }
-            })
-            .collect();
-        self
     }
 
     /// Replace the home configuration (validated: length, finite, within
@@ -416,16 +383,6 @@ impl Robot {
 
 /// Largest distance a chain step can move its child frame's origin from its
 /// parent's (fixed offset plus prismatic travel).
-fn step_length(step: &ChainStep, limits: &[JointLimit]) -> f64 {
-    let offset = step.origin.translation.vector.norm();
-    match step.motion {
-        Motion::Prismatic { dof, .. } => {
-            offset + limits[dof].lower.abs().max(limits[dof].upper.abs())
-        }
-        _ => offset,
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -90,6 +90,7 @@ fn build(model: &urdf_rs::Robot, base: &str, tip: &str, files: &MeshFiles) -> Re
         home,
         warnings,
         lever_arms: Vec::new(),
+        link_reach: Vec::new(),
     }
     .with_lever_arms())
 }
