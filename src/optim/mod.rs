@@ -31,7 +31,7 @@
 //!   ([`verify::continuous`]) and the trajectory output.
 //! - [`seeds`] — restarts from detours and seeded prior draws after a local minimum, and
 //!   the `samples: N` projected prior draws.
-//! - [`solution`] — [`Solution`], [`SolveStats`], [`SolveControl`];
+//! - [`solution`] — [`Solution`], [`SolveStats`], [`SolveControl`], [`Sharing`];
 //!   [`report`] — the response types; [`tolerances`] — every tolerance and
 //!   convergence threshold.
 //!
@@ -59,7 +59,7 @@ pub use report::{
     TrajectoryReport,
 };
 pub use request::{OptimizeRequest, PriorSpec, Task};
-pub use solution::{Solution, SolveControl, SolveStats};
+pub use solution::{Sharing, Solution, SolveControl, SolveStats};
 pub use task::{Boundary, Goal, GoalApproach, InnerSolver, SolverOptions, Waypoint};
 pub use tolerances::FEASIBILITY_TOLERANCE;
 
@@ -187,6 +187,7 @@ fn verified_duration(
     let search = SolveControl {
         deadline: Some(ctl.deadline.map_or(budget_end, |d| d.min(budget_end))),
         cancel: ctl.cancel.clone(),
+        sharing: ctl.sharing.clone(),
     };
     let mut duration = lower_bound? * infeasible::duration::DURATION_SEARCH_GROWTH;
     while duration <= task::MAX_DURATION_S && !search.should_stop() {

@@ -266,6 +266,7 @@ impl NodeState {
         let control = SolveControl {
             deadline: Some(target.at + settings.deadline()),
             cancel: Some(self.stop.clone()),
+            sharing: None,
         };
         Some(tokio::task::spawn_blocking(move || {
             let started = Instant::now();

@@ -28,13 +28,16 @@ use tokio::sync::Semaphore;
 /// before the request is answered 503.
 pub const GRACE: Duration = Duration::from_millis(500);
 
-/// What a job may read to stop cleanly.
+/// What a job may read to stop cleanly, and how many jobs share the
+/// machine with it.
 #[derive(Clone, Debug)]
 pub struct Job {
     /// When the job should stop and return its best answer.
     pub deadline: Instant,
     /// Raised when nobody waits for the answer any more.
     pub cancel: Arc<AtomicBool>,
+    /// Jobs running now, this one included.
+    pub running: Arc<AtomicUsize>,
 }
 
 impl Job {
@@ -168,6 +171,7 @@ impl Limiter {
         let job = Job {
             deadline,
             cancel: Arc::new(AtomicBool::new(false)),
+            running: self.running.clone(),
         };
         let registered = self.register(&job);
         let _cancel_on_drop = CancelOnDrop(job.cancel.clone());
@@ -230,6 +234,13 @@ mod tests {
         let deadline = Instant::now() + Duration::from_secs(5);
         let v = limiter.run(deadline, |_| 40 + 2).await.unwrap();
         assert_eq!(v, 42);
+        // A job counts itself among the running (its solves read this to
+        // decide whether a core is idle).
+        let seen = limiter
+            .run(deadline, |job| job.running.load(Ordering::SeqCst))
+            .await
+            .unwrap();
+        assert_eq!(seen, 1);
         assert_eq!(
             limiter.load(),
             LimiterLoad {

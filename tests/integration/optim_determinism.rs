@@ -46,3 +46,37 @@ fn a_hundred_runs_give_the_same_bytes() {
         assert_eq!(again, reference, "run {run} on {threads} threads");
     }
 }
+
+/// A solve that shares the machine (every core busy: its loops run on one
+/// thread) answers with the same bytes as one that has it to itself, the
+/// restarts' race included; and the switch follows the running count.
+#[test]
+fn a_solve_sharing_the_cores_gives_the_same_bytes_as_one_alone() {
+    use dpmp::optim::{optimize_with, Sharing, SolveControl};
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    use std::sync::Arc;
+    let robot = Robot::panda().unwrap();
+    let settings = ExampleSettings {
+        boundary: dpmp::optim::Boundary::Free,
+        ..Default::default()
+    };
+    // Typical problem 400 on free ends runs its restarts.
+    let req = typical_request(&robot, 400, &settings).unwrap();
+    let running = Arc::new(AtomicUsize::new(2));
+    let shared = SolveControl {
+        sharing: Some(Sharing {
+            running: running.clone(),
+            cores: 2,
+        }),
+        ..Default::default()
+    };
+    assert!(!shared.parallel());
+    let alone = optimize_with(&req, &robot, &SolveControl::default()).unwrap();
+    let sharing = optimize_with(&req, &robot, &shared).unwrap();
+    assert_eq!(alone.status, Status::Optimal);
+    let reference = alone.deterministic_json();
+    assert!(reference.contains("restart"), "the restarts must have run");
+    assert_eq!(sharing.deterministic_json(), reference);
+    running.store(1, Ordering::Relaxed);
+    assert!(shared.parallel(), "a core is idle again");
+}

@@ -370,6 +370,7 @@ fn a_cancelled_solve_stops_with_max_iterations_and_a_warning() {
     let ctl = SolveControl {
         deadline: None,
         cancel: Some(flag),
+        sharing: None,
     };
     let resp = optimize_with(&req, &robot, &ctl).unwrap();
     let problem = req.validate(&robot).unwrap();
@@ -381,6 +382,7 @@ fn a_cancelled_solve_stops_with_max_iterations_and_a_warning() {
     let past = SolveControl {
         deadline: Some(std::time::Instant::now()),
         cancel: None,
+        sharing: None,
     };
     let resp = optimize_with(&req, &robot, &past).unwrap();
     if !mean_ok {

@@ -107,27 +107,32 @@ impl Problem {
         let pairs: Vec<PhasePairs> = if self.scene.is_empty() {
             Vec::new()
         } else {
-            (0..rows.len())
-                .into_par_iter()
-                .filter_map(|p| {
-                    if ctl.should_stop() {
-                        interrupted.store(true, Ordering::Relaxed);
-                        return None;
-                    }
-                    let q = rows.position(p, &w);
-                    let frames = self.robot.fk(&q);
-                    let list =
-                        self.scene
-                            .clearances_within(&self.robot, &frames, self.activation_m);
-                    (!list.is_empty()).then_some(PhasePairs {
-                        phase: p,
-                        phase_value: rows.phases()[p],
-                        q,
-                        frames,
-                        list,
-                    })
+            let phase_pairs = |p: usize| {
+                if ctl.should_stop() {
+                    interrupted.store(true, Ordering::Relaxed);
+                    return None;
+                }
+                let q = rows.position(p, &w);
+                let frames = self.robot.fk(&q);
+                let list = self
+                    .scene
+                    .clearances_within(&self.robot, &frames, self.activation_m);
+                (!list.is_empty()).then_some(PhasePairs {
+                    phase: p,
+                    phase_value: rows.phases()[p],
+                    q,
+                    frames,
+                    list,
                 })
-                .collect()
+            };
+            if ctl.parallel() {
+                (0..rows.len())
+                    .into_par_iter()
+                    .filter_map(phase_pairs)
+                    .collect()
+            } else {
+                (0..rows.len()).filter_map(phase_pairs).collect()
+            }
         };
         let mut buffered = 0.0;
         let mut truth = 0.0;

@@ -128,10 +128,12 @@ impl Problem {
         cap: usize,
         ctl: &SolveControl,
     ) -> Race {
-        let mut lanes: Vec<Lane> = starts
-            .par_iter()
-            .map(|start| Lane::Running(Box::new(Scp::new(self, start, centre, cap, ctl))))
-            .collect();
+        let lane = |start| Lane::Running(Box::new(Scp::new(self, start, centre, cap, ctl)));
+        let mut lanes: Vec<Lane> = if ctl.parallel() {
+            starts.par_iter().map(lane).collect()
+        } else {
+            starts.iter().map(lane).collect()
+        };
         let mut round = 0;
         while lanes.iter().any(|l| matches!(l, Lane::Running(_)))
             && !lanes
@@ -139,13 +141,18 @@ impl Problem {
                 .any(|l| matches!(l, Lane::Finished(s) if s.status == Status::Optimal))
         {
             round += RACE_ROUND;
-            lanes.par_iter_mut().for_each(|lane| {
+            let advance = |lane: &mut Lane| {
                 if let Lane::Running(scp) = lane {
                     if let Some(done) = scp.advance(round) {
                         *lane = Lane::Finished(Box::new(done));
                     }
                 }
-            });
+            };
+            if ctl.parallel() {
+                lanes.par_iter_mut().for_each(advance);
+            } else {
+                lanes.iter_mut().for_each(advance);
+            }
         }
         let mut race = Race {
             finished: Vec::with_capacity(lanes.len()),

@@ -15,10 +15,12 @@ impl Problem {
     pub fn feasible_samples(&self, n: usize, ctl: &SolveControl) -> Result<Vec<SampleResult>> {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(self.options.seed);
         let draws = self.prior.sample(&mut rng, n);
-        let results: Vec<Result<Option<SampleResult>>> = draws
-            .par_iter()
-            .map(|draw| self.project_draw(draw, ctl))
-            .collect();
+        let project = |draw| self.project_draw(draw, ctl);
+        let results: Vec<Result<Option<SampleResult>>> = if ctl.parallel() {
+            draws.par_iter().map(project).collect()
+        } else {
+            draws.iter().map(project).collect()
+        };
         let mut out = Vec::new();
         for r in results {
             if let Some(s) = r? {

@@ -347,13 +347,10 @@ where
     T: Send,
     F: Fn(&R) -> T + Sync,
 {
-    rows.par_iter()
-        .map(|row| {
-            if ctl.should_stop() {
-                None
-            } else {
-                Some(f(row))
-            }
-        })
-        .collect()
+    let one = |row: &R| (!ctl.should_stop()).then(|| f(row));
+    if ctl.parallel() {
+        rows.par_iter().map(one).collect()
+    } else {
+        rows.iter().map(one).collect()
+    }
 }

@@ -3,7 +3,9 @@
 //! service's limits and the solve all run as one job on the blocking pool
 //! under the concurrency limit and the deadline counted from arrival.
 
-use crate::optim::{optimize_with, OptimizeRequest, OptimizeResponse, SolveControl, Status, Task};
+use crate::optim::{
+    optimize_with, OptimizeRequest, OptimizeResponse, Sharing, SolveControl, Status, Task,
+};
 use crate::service::config::ServiceConfig;
 use crate::service::error::ApiError;
 use crate::service::extract::{media_type, parse_json, read_body, within_body_time, MediaType};
@@ -37,11 +39,17 @@ pub async fn optimize(
     Ok(Json(response))
 }
 
-/// The solver's view of a limiter job.
+/// The solver's view of a limiter job: its deadline and cancel flag, and
+/// the jobs sharing the machine's cores (a job runs its loops on one thread
+/// while every core has a job).
 pub fn solve_control(job: &Job) -> SolveControl {
     SolveControl {
         deadline: Some(job.deadline),
         cancel: Some(job.cancel.clone()),
+        sharing: Some(Sharing {
+            running: job.running.clone(),
+            cores: rayon::current_num_threads(),
+        }),
     }
 }
 
