@@ -158,6 +158,12 @@ impl<'a> Scp<'a> {
         }
     }
 
+    /// The current iterate's true violation (what must reach zero: clearance
+    /// deficits and goal excess, summed).
+    pub(in crate::optim) fn true_violation(&self) -> f64 {
+        self.eval.true_violation
+    }
+
     /// The counters of the work done so far.
     pub(in crate::optim) fn stats(&self) -> &SolveStats {
         &self.stats
