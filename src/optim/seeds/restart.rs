@@ -120,9 +120,10 @@ impl Problem {
     /// iterations), advanced together in rounds of [`RACE_ROUND`]
     /// iterations each (in parallel within a round) until the end of the
     /// first round in which one of them is `optimal`, or until every run
-    /// has ended. Which runs have finished after a round depends only on
-    /// their iteration counts, so the outcome is the same whatever the
-    /// thread count.
+    /// has ended or been stopped as hopeless ([`stop_hopeless`]). Which
+    /// runs have finished after a round depends only on their iteration
+    /// counts and states, so the outcome is the same whatever the thread
+    /// count.
     fn race(
         &self,
         starts: &[DVector<f64>],
