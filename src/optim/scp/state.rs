@@ -425,13 +425,6 @@ impl<'a> Scp<'a> {
         self.converged = false;
         self.certify = false;
         self.certified = None;
-        if std::env::var("DPMP_TRACE").is_ok() && *self.centre == DVector::zeros(self.centre.len())
-        {
-            eprintln!(
-                "TRACE stall it {} exact {} rho {} viol {:.4}",
-                self.stats.iterations, self.exact, self.rho, self.eval.true_violation
-            );
-        }
         self.radius = self.radius.max(self.problem.options.trust_region);
         if !self.exact {
             self.exact = true;
