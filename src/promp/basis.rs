@@ -129,6 +129,9 @@ pub fn phase_grid(t: usize) -> Vec<f64> {
     (0..t).map(|k| k as f64 / (t - 1) as f64).collect()
 }
 
+/// Per-basis-function scratch values, on the stack for the usual basis sizes.
+type Scratch = smallvec::SmallVec<[f64; 16]>;
+
 /// Normalised basis and its phase derivative at `z`.
 ///
 /// With `g_i = -(z - c_i) / h`, `b_i' = g_i b_i`, so
@@ -138,15 +141,17 @@ fn psi_and_derivative(config: &PrompConfig, z: f64) -> (DVector<f64>, DVector<f6
     let nb = config.n_basis;
     let h = config.width;
     let centres = (0..nb).map(|i| i as f64 / (nb - 1) as f64);
-    let exponents: Vec<f64> = centres
+    // Stack buffers: this runs at every phase the continuous certificate
+    // and the joint-peak search visit.
+    let exponents: Scratch = centres
         .clone()
         .map(|c| -(z - c) * (z - c) / (2.0 * h))
         .collect();
     let top = exponents.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
-    let b: Vec<f64> = exponents.iter().map(|e| (e - top).exp()).collect();
+    let b: Scratch = exponents.iter().map(|e| (e - top).exp()).collect();
     let sum: f64 = b.iter().sum();
     let psi = DVector::from_iterator(nb, b.iter().map(|v| v / sum));
-    let g: Vec<f64> = centres.map(|c| -(z - c) / h).collect();
+    let g: Scratch = centres.map(|c| -(z - c) / h).collect();
     let mean_g: f64 = psi.iter().zip(&g).map(|(p, g)| p * g).sum();
     let dpsi = DVector::from_iterator(nb, psi.iter().zip(&g).map(|(p, g)| p * (g - mean_g)));
     (psi, dpsi)
@@ -162,7 +167,7 @@ fn psi_and_derivative(config: &PrompConfig, z: f64) -> (DVector<f64>, DVector<f6
 fn psi_derivatives(config: &PrompConfig, z: f64) -> [DVector<f64>; 4] {
     let (psi, dpsi) = psi_and_derivative(config, z);
     let nb = config.n_basis;
-    let g: Vec<f64> = (0..nb)
+    let g: Scratch = (0..nb)
         .map(|i| -(z - i as f64 / (nb - 1) as f64) / config.width)
         .collect();
     let against_g = |v: &DVector<f64>| v.iter().zip(&g).map(|(a, b)| a * b).sum::<f64>();

@@ -2,7 +2,7 @@
 
 use super::chain::Motion;
 use super::{Frames, Robot};
-use nalgebra::{Matrix3xX, Matrix6xX, Point3, Vector3};
+use nalgebra::{DVector, Matrix3xX, Matrix6xX, Point3, Vector3};
 
 impl Robot {
     /// `d(point)/dq` (3 x dof) for `point` (base frame, at the configuration
@@ -24,6 +24,27 @@ impl Robot {
             jac.set_column(dof, &self.joint_velocity_column(frames, step, point));
         }
         jac
+    }
+
+    /// `J(point)ᵀ u` (one entry per joint) for `point` (base frame) rigidly
+    /// attached to link `link` and a direction `u`: how fast the point moves
+    /// along `u` per unit speed of each joint, without building the
+    /// Jacobian ([`Robot::point_jacobian`]'s columns dotted with `u`).
+    pub fn point_velocity_along(
+        &self,
+        frames: &Frames,
+        link: usize,
+        point: &Point3<f64>,
+        u: &Vector3<f64>,
+    ) -> DVector<f64> {
+        let mut out = DVector::zeros(self.dof());
+        for (dof, &step) in self.dof_step.iter().enumerate() {
+            if step + 1 > link {
+                break;
+            }
+            out[dof] = self.joint_velocity_column(frames, step, point).dot(u);
+        }
+        out
     }
 
     /// Geometric Jacobian of the TCP (6 x dof): rows 0..3 the linear

@@ -396,10 +396,10 @@ impl Scene {
         frames: &Frames,
         c: &Clearance,
     ) -> DVector<f64> {
+        debug_assert_eq!(q.len(), robot.dof());
         let point = Point3::from(c.point_robot);
-        let jacobian = robot.point_jacobian(q, frames, c.link, &point);
         let normal = nalgebra::Vector3::from(c.normal);
-        jacobian.transpose() * normal
+        robot.point_velocity_along(frames, c.link, &point, &normal)
     }
 
     /// The minimum clearance at `q` and its gradient (one forward kinematics).

@@ -17,11 +17,15 @@ fn nudged(q: &[f64], i: usize, h: f64) -> Vec<f64> {
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(48))]
 
+    /// The point Jacobian, and its product with a direction built without
+    /// it (`point_velocity_along`, the clearance gradient's), against
+    /// central differences of the point's motion.
     #[test]
     fn point_jacobian_matches_finite_differences(
         fractions in proptest::collection::vec(0.02f64..0.98, 7),
         link_pick in 0usize..11,
         offset in proptest::array::uniform3(-0.1f64..0.1),
+        direction in proptest::array::uniform3(-1.0f64..1.0),
     ) {
         let robot = panda();
         let q = at_fractions(&robot, &fractions);
@@ -30,12 +34,17 @@ proptest! {
         let local = Point3::from(Vector3::from(offset));
         let point = frames.poses[link] * local;
         let jac = robot.point_jacobian(&q, &frames, link, &point);
+        let u = Vector3::from(direction);
+        let along = robot.point_velocity_along(&frames, link, &point, &u);
+        prop_assert_eq!(along.len(), robot.dof());
         for i in 0..robot.dof() {
             let plus = robot.fk(&nudged(&q, i, H)).poses[link] * local;
             let minus = robot.fk(&nudged(&q, i, -H)).poses[link] * local;
             let fd = (plus - minus) / (2.0 * H);
             let err = (jac.column(i) - fd).norm();
             prop_assert!(err < 1e-6, "link {link} joint {i}: analytic {} fd {fd} err {err}", jac.column(i));
+            let along_err = (along[i] - fd.dot(&u)).abs();
+            prop_assert!(along_err < 1e-6, "link {link} joint {i}: along {} fd {}", along[i], fd.dot(&u));
         }
     }
 

@@ -126,9 +126,13 @@ impl TimeWarp {
         let [s, s1, s2, s3] = self.at(tau);
         let [p0, p1, p2, p3] = basis.rows_at(s);
         let t = duration;
-        let v = &p1 * (s1 / t);
-        let a = (&p2 * (s1 * s1) + &p1 * s2) / (t * t);
-        let j = (&p3 * (s1 * s1 * s1) + &p2 * (3.0 * s1 * s2) + &p1 * s3) / (t * t * t);
+        // Element by element: one allocation per row, no temporaries.
+        let n = p0.len();
+        let v = DVector::from_fn(n, |i, _| p1[i] * (s1 / t));
+        let a = DVector::from_fn(n, |i, _| (p2[i] * (s1 * s1) + p1[i] * s2) / (t * t));
+        let j = DVector::from_fn(n, |i, _| {
+            (p3[i] * (s1 * s1 * s1) + p2[i] * (3.0 * s1 * s2) + p1[i] * s3) / (t * t * t)
+        });
         [p0, v, a, j]
     }
 }

@@ -455,8 +455,9 @@ impl<'a> DualActiveSet<'a> {
         let mut out = DVector::zeros(k);
         for i in (0..k).rev() {
             let mut s = d[i];
-            for c in i + 1..k {
-                s -= self.r[(i, c)] * out[c];
+            let row = self.r.view((i, i + 1), (1, k - i - 1));
+            for (r, o) in row.iter().zip(out.rows(i + 1, k - i - 1).iter()) {
+                s -= r * o;
             }
             out[i] = s / self.r[(i, i)];
         }
@@ -491,10 +492,12 @@ impl<'a> DualActiveSet<'a> {
     fn remove_active(&mut self, k: usize, capped: bool) {
         let ActiveRow { row, sign, .. } = self.active.remove(k);
         let last = self.active.len();
+        let n = self.dim();
+        // Shift the columns after `k` one to the left (column-major: each
+        // column's leading `c + 2` entries are one contiguous copy).
+        let data = self.r.as_mut_slice();
         for c in k..last {
-            for i in 0..=c + 1 {
-                self.r[(i, c)] = self.r[(i, c + 1)];
-            }
+            data.copy_within((c + 1) * n..(c + 1) * n + (c + 2).min(n), c * n);
         }
         for i in 0..self.dim() {
             self.r[(i, last)] = 0.0;
@@ -631,11 +634,17 @@ fn givens(a: f64, b: f64) -> (f64, f64) {
     (a / h, b / h)
 }
 
-/// Columns `(u, v)` of `m` become `(c u + s v, -s u + c v)`.
+/// Columns `(u, v)` of `m` (`u < v`) become `(c u + s v, -s u + c v)`.
+/// The columns are contiguous (column-major storage): a plain loop over
+/// two slices, which the compiler vectorises.
 fn rotate_columns(m: &mut DMatrix<f64>, u: usize, v: usize, c: f64, s: f64) {
-    for i in 0..m.nrows() {
-        let (x, y) = (m[(i, u)], m[(i, v)]);
-        m[(i, u)] = c * x + s * y;
-        m[(i, v)] = -s * x + c * y;
+    debug_assert!(u < v);
+    let n = m.nrows();
+    let (left, right) = m.as_mut_slice().split_at_mut(v * n);
+    let (cu, cv) = (&mut left[u * n..(u + 1) * n], &mut right[..n]);
+    for (x, y) in cu.iter_mut().zip(cv.iter_mut()) {
+        let (a, b) = (*x, *y);
+        *x = c * a + s * b;
+        *y = -s * a + c * b;
     }
 }

@@ -41,6 +41,7 @@ use crate::optim::tolerances::{
 use crate::optim::verify::Verification;
 use crate::Result;
 use nalgebra::DVector;
+use std::borrow::Cow;
 use std::time::Instant;
 
 /// What one iteration's QP produced.
@@ -57,7 +58,9 @@ pub(in crate::optim) struct Scp<'a> {
     ctl: &'a SolveControl,
     max_iterations: usize,
     started: Instant,
-    rows: PhaseRows,
+    /// The optimisation phases: the problem's grid, copied only when
+    /// verification adds phases to it.
+    rows: Cow<'a, PhaseRows>,
     stats: SolveStats,
     rho: f64,
     radius: f64,
@@ -89,7 +92,7 @@ impl<'a> Scp<'a> {
         ctl: &'a SolveControl,
     ) -> Self {
         let started = Instant::now();
-        let rows = problem.grid.clone();
+        let rows = Cow::Borrowed(&problem.grid);
         let mut stats = SolveStats::default();
         let eval = timed(&mut stats.evaluation_ms, || {
             problem.evaluate_grid(&rows, start.clone(), centre, ctl)
@@ -196,7 +199,7 @@ impl<'a> Scp<'a> {
             sol.report.final_qp = Some(final_qp);
             return Some(sol);
         }
-        let added = p.add_flagged(&mut self.rows, &v);
+        let added = p.add_flagged(self.rows.to_mut(), &v);
         self.stats.added_phases += added;
         if added == 0 {
             let reason = "dense verification failed on a constraint the optimiser cannot refine (goal or equality)";
