@@ -109,8 +109,14 @@ impl Problem {
                 let active = work.active_rows(&sol);
                 return Ok((sol, model_here - at.rho * work.left_out_shortfall(), active));
             }
-            self.add_linear_rows(&mut work, at.rows, &w, linear_missing);
-            work.add_clearance(&thin_violated(&clearance, &violated));
+            // Every row the solution breaks joins, unthinned: thinning
+            // here only bought more generation rounds, each a re-solve
+            // (docs/experiments.md).
+            for r in linear_missing {
+                self.add_linear_row(&mut work, at.rows, r);
+            }
+            let broken: Vec<usize> = violated.iter().map(|&(i, _)| i).collect();
+            work.add_clearance(&broken);
         }
     }
 
@@ -508,24 +514,6 @@ fn certifying_solve(qp: &Qp, settings: &QpSettings) -> Result<QpSolution, QpFail
         Err(QpFailure::Numerical(_)) => qp.solve(settings),
         other => other,
     }
-}
-
-/// The violated rows `violated` (index, violation) thinned in time, as
-/// indices into `clearance`.
-fn thin_violated(clearance: &[ClearanceRow], violated: &[(usize, f64)]) -> Vec<usize> {
-    let candidates: Vec<Candidate<(usize, usize)>> = violated
-        .iter()
-        .map(|&(i, v)| Candidate {
-            key: clearance[i].key,
-            phase: clearance[i].phase,
-            score: v,
-            in_band: true,
-        })
-        .collect();
-    thin_in_time(&candidates)
-        .into_iter()
-        .map(|k| violated[k].0)
-        .collect()
 }
 
 /// What one QP inequality is.

@@ -13,7 +13,10 @@
 //! Constraints are smooth in time, so of a run of neighbouring phases of one
 //! constraint (one joint bound, one robot-shape/obstacle pair) the local
 //! maxima of the violation and every [`RUN_STRIDE`]-th phase suffice to
-//! steer the step; generation adds the rest if they turn out to matter.
+//! steer the QP's first working set; generation adds every row a solution
+//! breaks, unthinned (each round is a re-solve, and thinning there cost more
+//! rounds than the rows it saved: hard set −10 % in total, p90 −24 %;
+//! docs/experiments.md).
 
 use std::collections::BTreeMap;
 
