@@ -17,10 +17,7 @@ impl Robot {
     ) -> Matrix3xX<f64> {
         debug_assert_eq!(q.len(), self.dof());
         let mut jac = Matrix3xX::zeros(self.dof());
-        for (dof, &step) in self.dof_step.iter().enumerate() {
-            if step + 1 > link {
-                break;
-            }
+        for (dof, step) in self.joints_moving(link) {
             jac.set_column(dof, &self.joint_velocity_column(frames, step, point));
         }
         jac
@@ -38,13 +35,20 @@ impl Robot {
         u: &Vector3<f64>,
     ) -> DVector<f64> {
         let mut out = DVector::zeros(self.dof());
-        for (dof, &step) in self.dof_step.iter().enumerate() {
-            if step + 1 > link {
-                break;
-            }
+        for (dof, step) in self.joints_moving(link) {
             out[dof] = self.joint_velocity_column(frames, step, point).dot(u);
         }
         out
+    }
+
+    /// `(joint index, chain step)` of every joint that moves link `link`
+    /// (those before it in the chain).
+    fn joints_moving(&self, link: usize) -> impl Iterator<Item = (usize, usize)> + '_ {
+        self.dof_step
+            .iter()
+            .copied()
+            .enumerate()
+            .take_while(move |&(_, step)| step < link)
     }
 
     /// Geometric Jacobian of the TCP (6 x dof): rows 0..3 the linear
