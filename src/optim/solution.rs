@@ -101,6 +101,9 @@ pub struct SolveStats {
     pub final_penalty: f64,
     /// Wall time building and solving QPs (ms).
     pub qp_ms: f64,
+    /// Of [`SolveStats::qp_ms`], the wall time in Clarabel's solves (the
+    /// certifying QPs, and any infeasibility the active-set method reports).
+    pub clarabel_ms: f64,
     /// Wall time evaluating iterates on the optimisation phases (ms).
     pub evaluation_ms: f64,
     /// Wall time in dense verification (ms).
@@ -137,6 +140,7 @@ impl SolveStats {
         self.added_phases += later.added_phases;
         self.final_penalty = later.final_penalty;
         self.qp_ms += later.qp_ms;
+        self.clarabel_ms += later.clarabel_ms;
         self.evaluation_ms += later.evaluation_ms;
         self.verification_ms += later.verification_ms;
         self.restarts += later.restarts;
@@ -144,7 +148,7 @@ impl SolveStats {
 }
 
 /// Run `f`, adding its wall time in milliseconds to `acc`.
-pub(super) fn timed<T>(acc: &mut f64, f: impl FnOnce() -> T) -> T {
+pub(in crate::optim) fn timed<T>(acc: &mut f64, f: impl FnOnce() -> T) -> T {
     let t = Instant::now();
     let out = f();
     *acc += t.elapsed().as_secs_f64() * 1e3;

@@ -386,6 +386,32 @@ impl Scene {
         Some(self.clearance(robot, shape, obstacle, &contact))
     }
 
+    /// The signed distance of one (robot primitive, obstacle) pair at
+    /// `frames` when it is below `limit`, else `limit`: a lower bound on the
+    /// pair's distance either way, from one placed primitive and one exact
+    /// query (the continuous certificate's bisection follows only the pairs
+    /// it has not certified yet). `limit` for an index out of range.
+    pub fn pair_distance_below(
+        &self,
+        robot: &Robot,
+        frames: &Frames,
+        shape: usize,
+        obstacle: usize,
+        limit: f64,
+    ) -> f64 {
+        let Some(compiled) = self.compiled.get(obstacle) else {
+            return limit;
+        };
+        if shape >= robot.collision_shapes().len() {
+            return limit;
+        }
+        let placed = place_shape(robot, frames, shape);
+        if ruled_out(placed.bounds.gap(&compiled.bounds), limit) {
+            return limit;
+        }
+        obstacle_contact(&placed, compiled, limit).map_or(limit, |c| c.distance.min(limit))
+    }
+
     /// `d(c.distance)/dq` at configuration `q` (whose forward kinematics is
     /// `frames`): the normal times the Jacobian of the robot witness point on
     /// its link. `dof` entries.

@@ -10,7 +10,7 @@ use crate::optim::qp::dual_active_set::WarmStart;
 use crate::optim::qp::{Cone, Inequality, Qp, QpFailure, QpSettings, QpSolution};
 use crate::optim::scp::evaluate::{GoalEval, GridEval};
 use crate::optim::scp::working_set::{thin_in_time, Candidate};
-use crate::optim::solution::{SolveControl, SolveStats};
+use crate::optim::solution::{timed, SolveControl, SolveStats};
 use crate::optim::tolerances::{buffered_angle, buffered_tolerance};
 use crate::optim::tolerances::{
     ACTIVE_DUAL_FRACTION, CERTIFY_TIGHTENING, CLEARANCE_BAND_M, CLEARANCE_BUFFER_M,
@@ -80,12 +80,16 @@ impl Problem {
         loop {
             round += 1;
             let sol = if at.certify {
-                certifying_solve(&work.qp, &settings)?
+                timed(&mut stats.clarabel_ms, || {
+                    certifying_solve(&work.qp, &settings)
+                })?
             } else {
                 // Infeasibility is a proof: Clarabel (the solver of record)
                 // confirms what the active-set method reports.
                 match work.qp.solve_active_set(&warm, mu) {
-                    Err(QpFailure::Infeasible) => certifying_solve(&work.qp, &settings)?,
+                    Err(QpFailure::Infeasible) => timed(&mut stats.clarabel_ms, || {
+                        certifying_solve(&work.qp, &settings)
+                    })?,
                     other => other?,
                 }
             };
