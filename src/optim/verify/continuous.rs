@@ -109,7 +109,36 @@ struct OpenPair {
     b: f64,
 }
 
+impl OpenPair {
+    /// The pair's bound on the interval for displacement bound
+    /// `displacement` ([`pair_bound`]).
+    fn bound(&self, displacement: f64) -> f64 {
+        pair_bound(self.a, self.b, displacement)
+    }
+
+    /// Whether the interval is decided for this pair: its bound meets
+    /// `required`, or an end already misses it (the bound then stands as
+    /// the certificate's, below the requirement).
+    fn settled(&self, displacement: f64, required: f64) -> bool {
+        self.bound(displacement) >= required || self.a < required || self.b < required
+    }
+}
+
 impl Sample {
+    /// A sample whose forward kinematics, lever arms and pairs are computed
+    /// when first needed.
+    fn new(z: f64, q: Vec<f64>, qd: Vec<f64>, clearance: f64) -> Sample {
+        Sample {
+            z,
+            q,
+            qd,
+            clearance,
+            frames: OnceLock::new(),
+            arms: OnceLock::new(),
+            pairs: OnceLock::new(),
+        }
+    }
+
     fn frames(&self, robot: &Robot) -> &Frames {
         self.frames.get_or_init(|| robot.fk(&self.q))
     }
@@ -229,14 +258,13 @@ impl Problem {
         ctl: &SolveControl,
     ) -> Option<Certificate> {
         let samples: Vec<Sample> = (0..self.dense_phases.len())
-            .map(|p| Sample {
-                z: self.dense_phases[p],
-                q: q.row(p).iter().copied().collect(),
-                qd: qd.row(p).iter().copied().collect(),
-                clearance: clearance[p].unwrap_or(self.activation_m),
-                frames: OnceLock::new(),
-                arms: OnceLock::new(),
-                pairs: OnceLock::new(),
+            .map(|p| {
+                Sample::new(
+                    self.dense_phases[p],
+                    q.row(p).iter().copied().collect(),
+                    qd.row(p).iter().copied().collect(),
+                    clearance[p].unwrap_or(self.activation_m),
+                )
             })
             .collect();
         if samples.len() == 1 {
@@ -353,12 +381,11 @@ impl Problem {
             }
         }
         pairs.retain(|o| {
-            let bound = pair_bound(o.a, o.b, displacement);
-            let certified = bound >= required || o.a < required || o.b < required;
-            if certified {
-                out.accept(bound, displacement);
+            let settled = o.settled(displacement, required);
+            if settled {
+                out.accept(o.bound(displacement), displacement);
             }
-            !certified
+            !settled
         });
         pairs
     }
@@ -409,18 +436,14 @@ impl Problem {
                     false => OpenPair { a: m, ..*o },
                 })
                 .collect();
-            let displacement = self.displacement(lo, hi, |d| {
-                spans
-                    .iter()
-                    .all(|o| pair_bound(o.a, o.b, d) >= required || o.a.min(o.b) < required)
-            });
+            let displacement =
+                self.displacement(lo, hi, |d| spans.iter().all(|o| o.settled(d, required)));
             let still_open: Vec<OpenPair> = spans
                 .into_iter()
                 .filter(|o| {
-                    let bound = pair_bound(o.a, o.b, displacement);
-                    let settled = bound >= required || o.a < required || o.b < required;
+                    let settled = o.settled(displacement, required);
                     if settled || depth + 1 == MAX_BISECTIONS {
-                        out.accept(bound, displacement);
+                        out.accept(o.bound(displacement), displacement);
                     }
                     !settled
                 })
@@ -432,15 +455,12 @@ impl Problem {
     /// Positions and velocities at phase `z` (the rest computed on demand).
     fn bare_sample_at(&self, wm: &DMatrix<f64>, z: f64) -> Sample {
         let [psi, dpsi, ..] = self.warp.time_rows(&self.basis, z, self.duration);
-        Sample {
+        Sample::new(
             z,
-            q: (wm.transpose() * psi).iter().copied().collect(),
-            qd: (wm.transpose() * dpsi).iter().copied().collect(),
-            clearance: self.activation_m,
-            frames: OnceLock::new(),
-            arms: OnceLock::new(),
-            pairs: OnceLock::new(),
-        }
+            (wm.transpose() * psi).iter().copied().collect(),
+            (wm.transpose() * dpsi).iter().copied().collect(),
+            self.activation_m,
+        )
     }
 
     /// A full sample at phase `z`: positions, velocities and the clearance
