@@ -22,6 +22,9 @@ use serde::de::DeserializeOwned;
 use serde::Serialize;
 use std::time::{Duration, Instant};
 
+/// How often [`Cell::wait_for_node`] looks at the match tables.
+const DISCOVERY_POLL: Duration = Duration::from_millis(20);
+
 /// The messages of one camera frame and robot state, with a target.
 #[derive(Clone, Debug)]
 pub struct Frame {
@@ -219,8 +222,15 @@ impl Cell {
         &mut self.node
     }
 
-    /// Start the cell's spinner (it keeps the ROS graph the waits read)
+    /// Start the cell's spinner (it keeps the match tables this reads)
     /// and wait until the node has matched every topic both ways.
+    ///
+    /// The wait polls the node's match tables rather than awaiting
+    /// ros2-client's `wait_for_subscription`: that future wakes on graph
+    /// events sent into a channel of 8 with `try_send`, and on a busy
+    /// machine a burst of discovery traffic fills it, drops the one match
+    /// event the wait needs, and leaves it waiting after discovery is done.
+    /// The tables themselves are updated on every match.
     pub async fn wait_for_node(&mut self, timeout: Duration) -> Result<()> {
         if let Some(spinner) = self.spinner.take() {
             self.spinning = Some(tokio::spawn(async move {
@@ -229,25 +239,44 @@ impl Cell {
                 }
             }));
         }
-        let all = async {
-            self.color.wait_for_subscription(&self.node).await;
-            self.depth.wait_for_subscription(&self.node).await;
-            self.info.wait_for_subscription(&self.node).await;
-            self.joints.wait_for_subscription(&self.node).await;
-            self.target.wait_for_subscription(&self.node).await;
-            self.trajectory.wait_for_publisher(&self.node).await;
-            self.diagnostics.wait_for_publisher(&self.node).await;
-        };
-        tokio::time::timeout(timeout, all).await.map_err(|_| {
-            dds(
-                "discovery",
-                format!("no dpmp node matched within {timeout:?}"),
-            )
-        })?;
+        let until = Instant::now() + timeout;
+        loop {
+            let unmatched = self.unmatched_topics();
+            if unmatched.is_empty() {
+                break;
+            }
+            if Instant::now() >= until {
+                let what = format!(
+                    "no dpmp node matched within {timeout:?} (unmatched: {})",
+                    unmatched.join(", ")
+                );
+                return Err(dds("discovery", what));
+            }
+            tokio::time::sleep(DISCOVERY_POLL).await;
+        }
         // The writers have seen the node's readers; give the readers a
         // moment to match the writers too (discovery runs both ways).
         tokio::time::sleep(Duration::from_millis(500)).await;
         Ok(())
+    }
+
+    /// The cell's topics with no matched node endpoint yet: its
+    /// publishers with no reader and its subscriptions with no writer.
+    fn unmatched_topics(&self) -> Vec<&'static str> {
+        let node = &self.node;
+        [
+            ("color", self.color.get_subscription_count(node)),
+            ("depth", self.depth.get_subscription_count(node)),
+            ("camera_info", self.info.get_subscription_count(node)),
+            ("joint_states", self.joints.get_subscription_count(node)),
+            ("target", self.target.get_subscription_count(node)),
+            ("trajectory", self.trajectory.get_publisher_count(node)),
+            ("diagnostics", self.diagnostics.get_publisher_count(node)),
+        ]
+        .into_iter()
+        .filter(|&(_, matched)| matched == 0)
+        .map(|(topic, _)| topic)
+        .collect()
     }
 
     /// Publish the camera info, the joint state and the colour and depth
