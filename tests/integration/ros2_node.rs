@@ -39,16 +39,20 @@ const DEADLINE_S: f64 = 60.0;
 const SETTLE: Duration = Duration::from_millis(300);
 
 /// A domain of this test run's own, away from ROS's default 0; one per
-/// test (`test` 0 or 1), as they run at once. Domains 1-100 keep every
+/// test (`test` 0, 1 or 2), as they run at once. Domains 1-100 keep every
 /// RTPS port (`7400 + 250 d + …`) below Linux's ephemeral range (32768 and
 /// up), where another socket of the busy test process could hold one.
 fn domain(test: u16) -> u16 {
-    1 + 2 * (std::process::id() % 50) as u16 + test
+    1 + 3 * (std::process::id() % 33) as u16 + test
 }
 
 /// How long the cells wait for DDS discovery: generous, because the whole
 /// suite shares two cores while these tests run.
 const DISCOVERY: Duration = Duration::from_secs(90);
+
+/// How far past its timeout a failed discovery wait may return (one poll,
+/// scheduling on a loaded machine).
+const DISCOVERY_SLACK: Duration = Duration::from_secs(10);
 
 /// The test side's runtime (one thread: the cell's loop).
 fn runtime() -> tokio::runtime::Runtime {
@@ -410,4 +414,37 @@ fn only_optimal_answers_reach_the_controller_action() {
         (0, 0, 1),
         "{hasty:?}"
     );
+}
+
+#[test]
+fn a_cell_with_no_node_gives_up_in_time_naming_every_unmatched_topic() {
+    let settings = NodeSettings {
+        domain_id: domain(2),
+        ..NodeSettings::default()
+    };
+    let wait = Duration::from_millis(300);
+    let started = std::time::Instant::now();
+    let err = runtime().block_on(async {
+        let mut cell = Cell::new(&settings).unwrap();
+        let err = cell.wait_for_node(wait).await.unwrap_err();
+        cell.close().await;
+        err
+    });
+    let waited = started.elapsed();
+    assert!(
+        waited >= wait && waited < wait + DISCOVERY_SLACK,
+        "{waited:?}"
+    );
+    let message = err.to_string();
+    for topic in [
+        "color",
+        "depth",
+        "camera_info",
+        "joint_states",
+        "target",
+        "trajectory",
+        "diagnostics",
+    ] {
+        assert!(message.contains(topic), "{topic} missing from {message}");
+    }
 }
