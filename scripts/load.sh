@@ -3,12 +3,13 @@
 #
 #   scripts/load.sh                # release build, 10 s per point, 60 s memory run
 #   PROFILE=dev DURATION=5s MEMORY_S=30 scripts/load.sh
-#   SEED=3 scripts/load.sh         # another typical problem (default seed 0)
+#   SEEDS="0" scripts/load.sh      # one typical problem (default: seeds 0-19 in turn)
 #   ROUTES=plan MEMORY_S=0 scripts/load.sh   # /v1/plan only
 #
-# Measures /v1/optimize on the typical problem (real-like prior, 10-obstacle
-# cluster, 150 samples, 2 cm clearance; `dpmp serve --print-typical-request`)
-# at 1, 8 and 64 concurrent clients with wrk (installed with apt-get when
+# Measures /v1/optimize on typical problems (real-like prior, 10-obstacle
+# cluster, 150 samples, 2 cm clearance; `dpmp serve --print-typical-request`),
+# each client posting the seeds in turn so the figure is that of a mix of
+# problems rather than of one, at 1, 8 and 64 concurrent clients with wrk (installed with apt-get when
 # missing), then resident memory (VmRSS) every 5 s over a run at 8 clients.
 # /v1/plan is measured too when a model exists at models/default (needs
 # python3 to build the 640x480 JPEG body). Only loopback is used.
@@ -36,13 +37,27 @@ else
   BIN=target/debug/dpmp
 fi
 
-"$BIN" serve --print-typical-request "${SEED:-0}" > "$OUT/optimize.json"
+SEEDS=${SEEDS:-$(seq -s ' ' 0 19)}
+OPTIMIZE_BODIES=()
+for seed in $SEEDS; do
+  "$BIN" serve --print-typical-request "$seed" > "$OUT/optimize-$seed.json"
+  OPTIMIZE_BODIES+=("$OUT/optimize-$seed.json")
+done
+# Each wrk thread posts the bodies listed in bodies.txt in turn.
 cat > "$OUT/post.lua" <<LUA
-local f = io.open("$OUT/body.json", "rb")
+local bodies = {}
+for path in io.lines("$OUT/bodies.txt") do
+  local f = io.open(path, "rb")
+  bodies[#bodies + 1] = f:read("*a")
+  f:close()
+end
+local next_body = 0
 wrk.method = "POST"
-wrk.body = f:read("*a")
-f:close()
 wrk.headers["Content-Type"] = "application/json"
+request = function()
+  next_body = next_body % #bodies + 1
+  return wrk.format(nil, nil, nil, bodies[next_body])
+end
 LUA
 
 "$BIN" serve --addr "$ADDR" --queue 1024 --deadline-ms 5000 2> "$OUT/server.log" &
@@ -67,16 +82,23 @@ summarise() { # route clients < wrk output
     END {printf "%s clients=%s req/s=%s p50=%s p99=%s non2xx=%s %s\n", route, c, rps, p50, p99, (errors==""?0:errors), sock}'
 }
 
-bench_route() { # route body
-  cp "$2" "$OUT/body.json"
-  run_wrk "$1" 1 2s > /dev/null # warm-up
+use_bodies() { # body...
+  printf '%s\n' "$@" > "$OUT/bodies.txt"
+}
+
+bench_route() { # route body...
+  local route=$1
+  shift
+  use_bodies "$@"
+  run_wrk "$route" 1 2s > /dev/null # warm-up
   for c in 1 8 64; do
-    run_wrk "$1" "$c" "$DURATION" | tee "$OUT/wrk-$(basename "$1")-$c.txt" | summarise "$1" "$c"
+    run_wrk "$route" "$c" "$DURATION" | tee "$OUT/wrk-$(basename "$route")-$c.txt" | summarise "$route" "$c"
   done
 }
 
 echo "== $(nproc) cores, profile $PROFILE, $DURATION per point"
-[ "${ROUTES:-all}" = plan ] || bench_route /v1/optimize "$OUT/optimize.json"
+echo "== /v1/optimize on typical seeds: $SEEDS"
+[ "${ROUTES:-all}" = plan ] || bench_route /v1/optimize "${OPTIMIZE_BODIES[@]}"
 
 if [ -f models/default/config.json ] && command -v python3 >/dev/null; then
   # A real generated plant (its image as a 640x480 JPEG, its depth PNG, box and scene).
@@ -107,7 +129,7 @@ if [ "$MEMORY_S" -le 0 ]; then
   exit 0
 fi
 echo "== resident memory over ${MEMORY_S} s at 8 clients (/v1/optimize)"
-cp "$OUT/optimize.json" "$OUT/body.json"
+use_bodies "${OPTIMIZE_BODIES[@]}"
 run_wrk /v1/optimize 8 "${MEMORY_S}s" > "$OUT/wrk-memory.txt" &
 WRK=$!
 for t in $(seq 0 5 "$MEMORY_S"); do
