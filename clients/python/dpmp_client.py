@@ -16,11 +16,15 @@
 
 Every answer is the service's JSON as a dict (see api/openapi.yaml). A
 refused request raises DpmpError with the server's `code`, `message` and
-`field` (the offending input) and the HTTP status.
+`field` (the offending input) and the HTTP status. A service that cannot be
+reached (refused connection, unknown host, timeout) raises DpmpError too,
+with `status` None, `code` "unreachable", a message naming the URL, and the
+original exception as `__cause__`.
 """
 
 import base64
 import json
+import socket
 import struct
 import urllib.error
 import urllib.request
@@ -32,10 +36,13 @@ DEFAULT_URL = "http://127.0.0.1:8080"
 
 class DpmpError(Exception):
     """A request the service refused: HTTP `status`, and its `code`,
-    `message` and `field` (None when the error names no field)."""
+    `message` and `field` (None when the error names no field). When the
+    service could not be reached at all, `status` is None and `code` is
+    "unreachable"."""
 
     def __init__(self, status, code, message, field=None):
-        super().__init__(f"{status} {code}: {message}" + (f" (field {field})" if field else ""))
+        text = message if status is None else f"{status} {code}: {message}"
+        super().__init__(text + (f" (field {field})" if field else ""))
         self.status = status
         self.code = code
         self.message = message
@@ -102,8 +109,28 @@ class Client:
             with urllib.request.urlopen(request, timeout=self.timeout) as response:
                 text = response.read().decode("utf-8")
                 return json.loads(text) if text.strip().startswith(("{", "[")) else text
-        except urllib.error.HTTPError as e:
+        except urllib.error.HTTPError as e:  # an answer: the service's error
             raise _error_of(e) from None
+        except (urllib.error.URLError, ConnectionError, socket.timeout, TimeoutError) as e:
+            raise self._unreachable(e) from e
+
+    def _unreachable(self, error):
+        """The DpmpError for a request that got no answer (`error`: the
+        URLError, ConnectionError or timeout urllib raised)."""
+        reason = error.reason if isinstance(error, urllib.error.URLError) else error
+        hint = "is `dpmp serve` running?"
+        if isinstance(reason, (socket.timeout, TimeoutError)):
+            why = f"no answer within {self.timeout} s"
+            hint = "is it overloaded, or the client's timeout too short?"
+        elif isinstance(reason, ConnectionRefusedError):
+            why = "connection refused"
+        elif isinstance(reason, socket.gaierror):
+            why = f"unknown host ({reason.strerror or reason})"
+        else:
+            why = getattr(reason, "strerror", None) or str(reason) or type(reason).__name__
+        return DpmpError(
+            None, "unreachable", f"cannot reach the dPMP service at {self.base_url}: {why}; {hint}"
+        )
 
 
 def _error_of(http_error):

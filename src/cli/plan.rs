@@ -168,9 +168,12 @@ pub fn run(args: PlanArgs) -> Result<()> {
 fn load_model_and_robot(args: &PlanArgs) -> Result<(Arc<Model>, Arc<Robot>)> {
     if let Some(dir) = &args.model {
         if !dir.join("config.json").is_file() {
+            let here = std::env::current_dir()
+                .map(|d| format!(" (relative paths start at {})", d.display()))
+                .unwrap_or_default();
             return Err(Error::file(
                 dir,
-                "no trained model here (config.json missing): train one with `dpmp train` (see the README), or leave --model out for the shipped one",
+                format!("no trained model here (config.json missing){here}: give the model folder's path, train one with `dpmp train` (see the README), or leave --model out for the shipped model (it reads the berry's depth: give --depth or --target-position)"),
             ));
         }
     }

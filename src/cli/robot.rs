@@ -54,7 +54,8 @@ pub struct ClearanceArgs {
     /// Joint values, comma separated (rad), one per joint.
     #[arg(long, allow_hyphen_values = true)]
     pub q: String,
-    /// Scene file: `{"obstacles": [...]}` in the request schema.
+    /// Scene file: `{"obstacles": [...]}` in the request schema (e.g.
+    /// examples/scene.json), or an optimise request file (its obstacles).
     #[arg(long)]
     pub scene: PathBuf,
     /// Also list every pair closer than this (m).
@@ -104,7 +105,7 @@ pub fn run(command: RobotCommand) -> Result<()> {
             }
             let robot = args.robot.load()?;
             json!({
-                "links": robot.hull_tightness(args.spacing),
+                "links": robot.hull_tightness(args.spacing, true),
                 "warnings": robot.warnings(),
             })
         }
@@ -154,10 +155,22 @@ pub fn fk_json(robot: &Robot, q_text: &str) -> Result<Value> {
     Ok(json!({"joint_names": robot.joint_names(), "q": q, "frames": out}))
 }
 
+/// The scene `--scene` names: a scene file (`{"obstacles": [...]}`), or an
+/// optimise request file, whose obstacles it takes.
+fn scene_of(path: &std::path::Path) -> Result<Scene> {
+    use std::collections::BTreeMap;
+    let keys: BTreeMap<String, serde::de::IgnoredAny> = crate::fsio::read_json(path)?;
+    if !keys.contains_key("prior") {
+        return Scene::from_file(path);
+    }
+    let request = super::optimize::read_request(path)?;
+    Scene::new(request.task.obstacles)
+}
+
 fn clearance_json(args: &ClearanceArgs) -> Result<Value> {
     let robot = args.robot.load()?;
     let q = parse_configuration(&robot, "--q", &args.q)?;
-    let scene = Scene::from_file(&args.scene)?;
+    let scene = scene_of(&args.scene)?;
     let frames = robot.fk(&q);
     let mut out = match scene.min_clearance(&robot, &frames) {
         None => json!({"min_clearance_m": null, "link": null, "obstacle": null}),

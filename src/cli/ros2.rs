@@ -53,6 +53,11 @@ pub struct NodeArgs {
     /// Log as JSON lines instead of text.
     #[arg(long)]
     pub log_json: bool,
+    /// Show the DDS transport's own log (RustDDS, ros2-client): `-v` its
+    /// warnings and errors, `-vv` its discovery steps. Quiet by default:
+    /// its warnings are routine on a healthy run.
+    #[arg(short, long, action = clap::ArgAction::Count)]
+    pub verbose: u8,
 }
 
 /// Arguments of `dpmp ros2 replay`.
@@ -116,10 +121,15 @@ mod with_ros2 {
     use std::sync::Arc;
     use std::time::Duration;
 
-    /// dpmp's log at `info`; the DDS stack's only from `warn` (its `info`
-    /// is every discovery step).
-    fn init_logging(json: bool) {
-        crate::cli::serve::init_logging_with(json, "info,rustdds=warn,ros2_client=warn");
+    /// dpmp's log at `info`; the DDS stack's off unless `-v` (warnings)
+    /// or `-vv` (its `info`, every discovery step) asks for it.
+    fn init_logging(args: &NodeArgs) {
+        let filter = match args.verbose {
+            0 => "info,rustdds=off,ros2_client=off",
+            1 => "info,rustdds=warn,ros2_client=warn",
+            _ => "info,rustdds=info,ros2_client=info",
+        };
+        crate::cli::serve::init_logging_with(args.log_json, filter);
     }
 
     /// The settings the flags say.
@@ -153,7 +163,7 @@ mod with_ros2 {
 
     /// `dpmp ros2 node`.
     pub fn node(args: NodeArgs) -> Result<()> {
-        init_logging(args.log_json);
+        init_logging(&args);
         let settings = settings(&args)?;
         let (model, robot) = model_and_robot(&args)?;
         let node = crate::ros2::spawn(settings, model, robot)?;
@@ -168,7 +178,7 @@ mod with_ros2 {
         if !(1..=10_000).contains(&args.targets) {
             return Err(Error::invalid("--targets", "must be in 1..=10000"));
         }
-        init_logging(args.node.log_json);
+        init_logging(&args.node);
         let settings = settings(&args.node)?;
         let (model, robot) = model_and_robot(&args.node)?;
         let frames = frames(&model, &robot, args.targets, args.seed)?;

@@ -111,6 +111,7 @@ pub fn run(args: ServeArgs) -> Result<()> {
         return crate::cli::print_json(&request);
     }
     let config = config_from_args(&args)?;
+    log_auth(&config);
     let model = load_model(args.model.as_deref(), args.no_model)?;
     let state = AppState::new(config, robot, model)?;
     crate::service::serve(state)
@@ -181,7 +182,7 @@ pub fn config_from_args(args: &ServeArgs) -> Result<ServiceConfig> {
         max_connections_per_ip: args.max_connections_per_ip,
         drain_timeout: Duration::from_millis(args.drain_timeout_ms),
         max_decoded_bytes,
-        token: load_token(args.token_file.as_deref())?,
+        token: load_token(args.token_file.as_deref(), std::env::var_os(TOKEN_ENV))?,
         cors_origins: args.cors_origins.clone(),
         ..defaults
     };
@@ -189,15 +190,43 @@ pub fn config_from_args(args: &ServeArgs) -> Result<ServiceConfig> {
     Ok(config)
 }
 
-/// The token from `--token-file`, else from `DPMP_API_TOKEN`, else none.
-fn load_token(file: Option<&std::path::Path>) -> Result<Option<Token>> {
+/// The token from `--token-file`, else from `DPMP_API_TOKEN` (`env`, its
+/// value if set), else none. A set but empty (or blank) variable is refused
+/// like an empty file: it must not turn auth off without a word.
+fn load_token(
+    file: Option<&std::path::Path>,
+    env: Option<std::ffi::OsString>,
+) -> Result<Option<Token>> {
     if let Some(path) = file {
         let text = std::fs::read_to_string(path).map_err(|e| Error::file(path, e.to_string()))?;
         return Token::new("--token-file", &text).map(Some);
     }
-    match std::env::var(TOKEN_ENV) {
-        Ok(text) if !text.trim().is_empty() => Token::new(TOKEN_ENV, &text).map(Some),
-        _ => Ok(None),
+    let Some(value) = env else {
+        return Ok(None);
+    };
+    let text = value.into_string().map_err(|_| {
+        Error::invalid(
+            TOKEN_ENV,
+            "is not valid UTF-8: set a token of visible ASCII characters",
+        )
+    })?;
+    if text.trim().is_empty() {
+        return Err(Error::invalid(
+            TOKEN_ENV,
+            "is set but empty: set a token (1..=4096 visible ASCII characters), or unset the variable to serve without auth",
+        ));
+    }
+    Token::new(TOKEN_ENV, &text).map(Some)
+}
+
+/// Say at start whether the protected routes need the token.
+fn log_auth(config: &ServiceConfig) {
+    if config.token.is_some() {
+        tracing::info!("auth on: /v1/* and /metrics need the bearer token");
+    } else {
+        tracing::warn!(
+            "auth off: every route answers without a token (set --token-file or DPMP_API_TOKEN)"
+        );
     }
 }
 
@@ -304,17 +333,34 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("token");
         std::fs::write(&path, "abc123\n").unwrap();
-        let t = load_token(Some(&path)).unwrap().unwrap();
+        let t = load_token(Some(&path), None).unwrap().unwrap();
         assert!(t.matches(b"abc123"));
         std::fs::write(&path, "\n").unwrap();
         assert_eq!(
-            load_token(Some(&path)).unwrap_err().field(),
+            load_token(Some(&path), None).unwrap_err().field(),
             Some("--token-file")
         );
         let missing = dir.path().join("missing");
         assert!(matches!(
-            load_token(Some(&missing)).unwrap_err(),
+            load_token(Some(&missing), None).unwrap_err(),
             Error::File { .. }
         ));
+    }
+
+    #[test]
+    fn an_empty_token_variable_is_refused_not_taken_as_no_auth() {
+        assert!(load_token(None, None).unwrap().is_none());
+        let t = load_token(None, Some("s3cret".into())).unwrap().unwrap();
+        assert!(t.matches(b"s3cret"));
+        for blank in ["", "  ", "\t\n"] {
+            let e = load_token(None, Some(blank.into())).unwrap_err();
+            assert_eq!(e.field(), Some(TOKEN_ENV), "{blank:?}");
+            assert!(e.to_string().contains("set but empty"), "{e}");
+        }
+        // The file wins over the variable, empty or not.
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("token");
+        std::fs::write(&path, "abc").unwrap();
+        assert!(load_token(Some(&path), Some("".into())).unwrap().is_some());
     }
 }

@@ -498,7 +498,7 @@ mod tests {
         assert_eq!(p.condition_values(false).unwrap(), vec![0.25, 0.5]);
         let none = crate::net::preprocess::Prepared { depth_m: None, ..p };
         let e = none.condition_values(true).unwrap_err();
-        assert_eq!(e.field(), Some("depth_base64"));
+        assert_eq!(e.field(), Some("depth"));
     }
 
     #[test]

@@ -82,8 +82,8 @@ impl Prepared {
         if depth_condition {
             let depth = self.depth_m.ok_or_else(|| {
                 Error::invalid(
-                    "depth_base64",
-                    "this model is conditioned on the target's depth: send an aligned depth image (depth_base64, --depth) or target_position, or serve a box-only model (models/rgb-only)",
+                    "depth",
+                    "this model is conditioned on the target's depth: give it the berry's depth, or use a box-only model (models/rgb-only)",
                 )
             })?;
             values.push(((depth - DEPTH_CONDITION_CENTRE_M) / DEPTH_CONDITION_SCALE_M) as f32);

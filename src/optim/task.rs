@@ -17,6 +17,10 @@ pub const MAX_DURATION_S: f64 = 600.0;
 /// Largest accepted number of `via_points`.
 pub const MAX_VIA_POINTS: usize = 32;
 
+/// Most joints a request may describe (prior annotation entries, the length
+/// of every joint vector), checked while it is read.
+pub const MAX_JOINTS: usize = 64;
+
 /// A point the trajectory passes at a given time: a configuration
 /// (exactly by default: ProMP via-point conditioning, an equality of the
 /// optimisation, so with nothing else binding the answer is the prior
@@ -36,7 +40,11 @@ pub struct Waypoint {
     pub time_s: Option<f64>,
     /// The joint positions (rad) at that time, one per joint; give this or
     /// `position`.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "crate::strict_json::option_vec_at_most::<_, _, MAX_JOINTS>"
+    )]
     pub configuration: Option<Vec<f64>>,
     /// The TCP position (m, base frame) at that time; give this or
     /// `configuration`.
@@ -203,6 +211,7 @@ pub struct SolverOptions {
     pub qp_tolerance: f64,
     /// Optional final configuration as an equality (for conditioning-style
     /// requests and tests).
+    #[serde(deserialize_with = "crate::strict_json::option_vec_at_most::<_, _, MAX_JOINTS>")]
     pub final_configuration: Option<Vec<f64>>,
     /// Which solver takes the intermediate SCP iterations; the final QP
     /// of an `optimal` answer is Clarabel's either way.

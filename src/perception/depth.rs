@@ -59,8 +59,13 @@ impl DepthImage {
     /// Decode a 16-bit single-channel PNG; `field` names the input in errors.
     pub fn decode_png(bytes: &[u8], scale_m: f64, field: &str) -> Result<Self> {
         check_scale(scale_m, field)?;
-        let image = image::load_from_memory_with_format(bytes, image::ImageFormat::Png)
-            .map_err(|e| Error::invalid(field, format!("not a readable PNG: {e}")))?;
+        let image =
+            image::load_from_memory_with_format(bytes, image::ImageFormat::Png).map_err(|e| {
+                Error::invalid(
+                    field,
+                    format!("not a readable PNG: {}", super::image_error_words(&e)),
+                )
+            })?;
         let (width, height) = (image.width(), image.height());
         match image {
             image::DynamicImage::ImageLuma16(buffer) => {

@@ -13,6 +13,20 @@ pub mod depth;
 pub mod target;
 
 pub use camera::{Camera, CameraModel, Intrinsics};
+
+/// What is wrong with an image that did not decode, in a client's words
+/// (the decoders' own text carries their internals: `ChunkType { .. }`).
+pub fn image_error_words(e: &image::ImageError) -> &'static str {
+    use image::ImageError;
+    match e {
+        ImageError::Decoding(_) | ImageError::Parameter(_) | ImageError::Encoding(_) => {
+            "the data is corrupt or truncated"
+        }
+        ImageError::IoError(_) => "the data ends early (truncated)",
+        ImageError::Limits(_) => "it needs more memory than its size allows",
+        ImageError::Unsupported(_) => "it uses a feature this decoder does not support",
+    }
+}
 pub use cloud::{depth_cloud, CloudSettings, KeepOut, SensedCloud};
 pub use depth::DepthImage;
 pub use target::{locate_target, TargetEstimate};

@@ -126,11 +126,13 @@ pub(super) fn locate(
 }
 
 /// The pre-grasp goal `standoff` short of `position` on the line from the
-/// home TCP (see the module docs).
+/// home TCP (see the module docs). A berry, or a goal, beyond the arm's
+/// reach is refused naming `field` (where the target came from).
 pub(super) fn goal_from_target(
     robot: &Robot,
     target: Located,
     standoff: Option<f64>,
+    field: &str,
 ) -> Result<TargetReport> {
     let Located {
         position,
@@ -141,15 +143,34 @@ pub(super) fn goal_from_target(
     let standoff = standoff.unwrap_or(DEFAULT_GOAL_STANDOFF_M);
     let home = robot.tcp_pose(&robot.home()).translation.vector;
     let berry = Vector3::from(position);
+    let reach = robot.reach();
+    let from_depth = |e: Error| {
+        match (depth_m, e) {
+        (Some(d), Error::Invalid { field, message }) => Error::invalid(
+            field,
+            format!(
+                "{message}; the depth image reads {d:.2} m at the target box: check it and its scale (metres per unit)"
+            ),
+        ),
+        (_, e) => e,
+    }
+    };
+    reach
+        .check(field, "the berry", &position, standoff + GOAL_TOLERANCE_M)
+        .map_err(from_depth)?;
     let axis = (berry - home)
         .try_normalize(1e-9)
-        .ok_or_else(|| Error::invalid("target_position", "coincides with the home TCP position"))?;
+        .ok_or_else(|| Error::invalid(field, "coincides with the home TCP position"))?;
     let goal = berry - axis * standoff;
+    let goal_array = [goal.x, goal.y, goal.z];
+    reach
+        .check(field, "the pre-grasp goal", &goal_array, GOAL_TOLERANCE_M)
+        .map_err(from_depth)?;
     Ok(TargetReport {
         position,
         depth_m,
         source,
-        goal: [goal.x, goal.y, goal.z],
+        goal: goal_array,
         goal_tolerance_m: GOAL_TOLERANCE_M,
     })
 }

@@ -110,6 +110,8 @@ pub fn predict_and_optimize(
         camera_pose,
         world: source,
         world_field,
+        target_field,
+        names,
         mut task,
         ..
     } = request;
@@ -128,6 +130,17 @@ pub fn predict_and_optimize(
         None => None,
     };
     let depth_m = located.as_ref().map(|l| l.camera_depth_m);
+    if model.config().depth_condition && depth_m.is_none() {
+        return Err(Error::invalid(
+            &names.depth,
+            format!(
+                "the model {:?} reads the berry's depth: give {} (an aligned depth image) or {} (the berry's 3-D position), or plan with a box-only model (models/rgb-only)",
+                model.name(),
+                names.depth,
+                names.target_position
+            ),
+        ));
+    }
     let world = match (source, &located, &posed) {
         (WorldSource::Depth, Some(l), Some(posed)) => {
             let TargetInput::Depth(depth, _) = &target else {
@@ -149,7 +162,7 @@ pub fn predict_and_optimize(
     };
     let target = match located {
         Some(located) => {
-            let report = goal_from_target(robot, located, goal_standoff_m)?;
+            let report = goal_from_target(robot, located, goal_standoff_m, &target_field)?;
             task.goal = Some(report.goal(approach.as_ref()));
             Some(report)
         }

@@ -166,6 +166,12 @@ pub struct PlanRequest {
     pub(super) camera_pose: Option<Isometry3<f64>>,
     pub(super) world: WorldSource,
     pub(super) world_field: String,
+    /// The field a 3-D target comes from, named when it is out of reach:
+    /// the target position, the depth image, or its scale when the client
+    /// set one.
+    pub(super) target_field: String,
+    /// How the interface the request came through names its inputs.
+    pub(super) names: PlanFields,
     pub(super) task: Task,
 }
 
@@ -241,6 +247,11 @@ impl PlanRequest {
         if let Some(camera) = &parts.camera {
             camera.validate(&fields.camera)?;
         }
+        let target_field = match (&target, parts.depth_scale_m) {
+            (TargetInput::Depth(..), Some(_)) => fields.depth_scale.clone(),
+            (TargetInput::Depth(..), None) => fields.depth.clone(),
+            _ => fields.target_position.clone(),
+        };
         Ok(PlanRequest {
             image: parts.image,
             image_field: fields.image.clone(),
@@ -253,6 +264,8 @@ impl PlanRequest {
             camera_pose: parts.camera_pose,
             world: parts.world,
             world_field: fields.world.clone(),
+            target_field,
+            names: fields.clone(),
             task: parts.task,
         })
     }

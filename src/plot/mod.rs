@@ -68,6 +68,7 @@ fn temp_path(path: &Path) -> PathBuf {
 /// sibling of `path` (same extension, so plotters picks the encoder), which
 /// is renamed onto `path` when it succeeds and removed when anything fails.
 pub(crate) fn write_via_temp(path: &Path, draw: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
+    check_folder(path)?;
     let tmp = temp_path(path);
     let result = draw(&tmp)
         .and_then(|()| std::fs::rename(&tmp, path).map_err(|e| Error::write(path, e.to_string())));
@@ -77,7 +78,36 @@ pub(crate) fn write_via_temp(path: &Path, draw: impl FnOnce(&Path) -> Result<()>
     result
 }
 
+/// The folder `path` goes in must exist (plotters' own error for a missing
+/// one is its debug text).
+fn check_folder(path: &Path) -> Result<()> {
+    match path.parent() {
+        Some(folder) if !folder.as_os_str().is_empty() && !folder.is_dir() => Err(Error::write(
+            path,
+            format!(
+                "cannot write the plot: the folder {} does not exist",
+                folder.display()
+            ),
+        )),
+        _ => Ok(()),
+    }
+}
+
 /// Map any plotters error to a file error for `path`.
 pub(crate) fn plot_error<E: std::fmt::Display>(path: &Path) -> impl Fn(E) -> Error + '_ {
     move |e| Error::write(path, format!("cannot draw plot: {e}"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_plot_into_a_missing_folder_says_so() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("missing").join("plot.png");
+        let e = write_via_temp(&path, |_| Ok(())).unwrap_err();
+        assert!(e.to_string().contains("does not exist"), "{e}");
+        assert!(!e.to_string().contains("Os {"), "{e}");
+    }
 }

@@ -27,7 +27,7 @@ pub struct JointAnnotation {
     #[serde(deserialize_with = "flat_or_column")]
     pub mean_weights: Vec<f64>,
     /// The `n(n+1)/2`-number covariance code (raw diagonal).
-    #[serde(rename = "L")]
+    #[serde(rename = "L", deserialize_with = "covariance_code")]
     pub l: Vec<f64>,
 }
 
@@ -47,24 +47,68 @@ pub struct Prior {
 fn flat_or_column<'de, D: serde::Deserializer<'de>>(
     d: D,
 ) -> std::result::Result<Vec<f64>, D::Error> {
-    #[derive(Deserialize)]
-    #[serde(untagged)]
-    enum Entry {
-        Scalar(f64),
-        Column(Vec<f64>),
+    use serde::de::DeserializeSeed;
+    crate::strict_json::AtMost {
+        max: super::config::MAX_BASIS,
+        item: ScalarOrSingleton,
     }
-    let entries = Vec::<Entry>::deserialize(d)?;
-    entries
-        .into_iter()
-        .map(|e| match e {
-            Entry::Scalar(v) => Ok(v),
-            Entry::Column(c) if c.len() == 1 => Ok(c[0]),
-            Entry::Column(c) => Err(serde::de::Error::custom(format!(
-                "expected a single number per row, got {}",
-                c.len()
-            ))),
-        })
-        .collect()
+    .deserialize(d)
+}
+
+/// The covariance code of at most `MAX_BASIS` weights.
+fn covariance_code<'de, D: serde::Deserializer<'de>>(
+    d: D,
+) -> std::result::Result<Vec<f64>, D::Error> {
+    use serde::de::DeserializeSeed;
+    const MAX: usize = super::config::MAX_BASIS * (super::config::MAX_BASIS + 1) / 2;
+    crate::strict_json::AtMost::<std::marker::PhantomData<f64>>::items(MAX).deserialize(d)
+}
+
+/// One mean weight: a number, or a one-number row (`[w]`).
+#[derive(Clone, Copy)]
+struct ScalarOrSingleton;
+
+impl<'de> serde::de::DeserializeSeed<'de> for ScalarOrSingleton {
+    type Value = f64;
+
+    fn deserialize<D: serde::Deserializer<'de>>(self, d: D) -> std::result::Result<f64, D::Error> {
+        d.deserialize_any(self)
+    }
+}
+
+impl<'de> serde::de::Visitor<'de> for ScalarOrSingleton {
+    type Value = f64;
+
+    fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("a number or a one-number row [w]")
+    }
+
+    fn visit_f64<E>(self, v: f64) -> std::result::Result<f64, E> {
+        Ok(v)
+    }
+
+    fn visit_i64<E>(self, v: i64) -> std::result::Result<f64, E> {
+        Ok(v as f64)
+    }
+
+    fn visit_u64<E>(self, v: u64) -> std::result::Result<f64, E> {
+        Ok(v as f64)
+    }
+
+    fn visit_seq<A: serde::de::SeqAccess<'de>>(
+        self,
+        mut seq: A,
+    ) -> std::result::Result<f64, A::Error> {
+        use serde::de::Error as _;
+        let first: Option<f64> = seq.next_element()?;
+        match (first, seq.next_element::<serde::de::IgnoredAny>()?) {
+            (Some(v), None) => Ok(v),
+            (None, _) => Err(A::Error::custom("expected a single number per row, got 0")),
+            (Some(_), Some(_)) => Err(A::Error::custom(
+                "expected a single number per row, got more",
+            )),
+        }
+    }
 }
 
 /// Per-joint annotations (raw diagonal) of a distribution's diagonal blocks.

@@ -184,7 +184,18 @@ fn psi_derivatives(config: &PrompConfig, z: f64) -> [DVector<f64>; 4] {
 /// `V diag(s / (s² + r)) Uᵀ` so that the basis' poor conditioning (width
 /// 0.07 overlaps heavily: cond(PhiᵀPhi) ~ 5e8) is not squared.
 fn ridge_projector(phi: &DMatrix<f64>) -> Result<DMatrix<f64>> {
-    let svd = phi.clone().svd(true, true);
+    // A non-finite entry would make the SVD iterate for ever; the iteration
+    // count is bounded besides (nalgebra's `svd` has no bound; its
+    // tolerance, 5 eps, is kept so that the projector is unchanged).
+    if !phi.iter().all(|v| v.is_finite()) {
+        return Err(crate::Error::Numerical(
+            "the basis has a non-finite value (width too narrow for its phases)".into(),
+        ));
+    }
+    let svd = phi
+        .clone()
+        .try_svd(true, true, 5.0 * f64::EPSILON, 100_000)
+        .ok_or_else(|| crate::Error::Numerical("basis SVD did not converge".into()))?;
     let (Some(u), Some(v_t)) = (svd.u.as_ref(), svd.v_t.as_ref()) else {
         return Err(crate::Error::Numerical("basis SVD did not converge".into()));
     };

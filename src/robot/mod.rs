@@ -35,6 +35,7 @@ pub mod lever;
 pub mod limits_file;
 pub mod mesh;
 pub mod mesh_files;
+pub mod reach;
 pub mod urdf;
 
 pub use collision::{LinkShape, ShapeGeometry};
@@ -269,24 +270,36 @@ impl Robot {
     }
 
     /// For every mesh shape: its link, the mesh's triangle count and open
-    /// edges, the hull's vertex count, and [`hull::tightness`] at `spacing`.
-    pub fn hull_tightness(&self, spacing: f64) -> Vec<serde_json::Value> {
-        self.shapes
+    /// edges, the hull's vertex count, and [`hull::tightness`] at `spacing`;
+    /// `progress` shows a bar over the meshes.
+    pub fn hull_tightness(&self, spacing: f64, progress: bool) -> Vec<serde_json::Value> {
+        let meshes = self
+            .shapes
+            .iter()
+            .filter(|s| matches!(&s.geometry, ShapeGeometry::Convex(h) if h.source().is_some()))
+            .count();
+        let bar = crate::progress::bar(progress, meshes as u64, "link meshes checked");
+        let links = self
+            .shapes
             .iter()
             .filter_map(|s| match &s.geometry {
                 ShapeGeometry::Convex(h) => h.source().map(|mesh| {
+                    let tightness = hull::tightness(h, mesh, spacing);
+                    bar.inc(1);
                     serde_json::json!({
                         "link": s.link_name,
                         "triangles": mesh.triangles.len(),
                         "open_edges": mesh.open_edges(),
                         "hull_vertices": h.vertices().len(),
                         "allowance_m": h.allowance(),
-                        "tightness": hull::tightness(h, mesh, spacing),
+                        "tightness": tightness,
                     })
                 }),
                 _ => None,
             })
-            .collect()
+            .collect();
+        bar.finish_and_clear();
+        links
     }
 
     /// Replace the home configuration (validated: length, finite, within

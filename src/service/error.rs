@@ -7,7 +7,7 @@
 //! | 401 | `unauthorized` |
 //! | 404 | `not_found` |
 //! | 405 | `method_not_allowed` |
-//! | 408 | `body_timeout` |
+//! | 408 | `body_timeout`, `header_timeout` (written by the accept loop, [`super::server::json_errors`]) |
 //! | 413 | `body_too_large`, `image_too_large` |
 //! | 414 | `uri_too_long` |
 //! | 415 | `unsupported_media_type`, `unsupported_image_format` |
@@ -210,13 +210,35 @@ impl From<crate::Error> for ApiError {
     }
 }
 
+/// Longest message (bytes) an answer carries; a message that quotes a
+/// client's over-long key or id is cut there.
+pub const MAX_MESSAGE_BYTES: usize = 1024;
+
+/// Longest `field` (bytes) an answer carries.
+pub const MAX_FIELD_BYTES: usize = 256;
+
+/// `text` cut to at most `max` bytes (on a character boundary), saying how
+/// long it was.
+fn shortened(text: &str, max: usize) -> std::borrow::Cow<'_, str> {
+    if text.len() <= max {
+        return text.into();
+    }
+    let mut end = max;
+    while !text.is_char_boundary(end) {
+        end -= 1;
+    }
+    format!("{}… ({} bytes in all)", &text[..end], text.len()).into()
+}
+
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
+        let message = shortened(&self.message, MAX_MESSAGE_BYTES);
+        let field = self.field.as_deref().map(|f| shortened(f, MAX_FIELD_BYTES));
         let body = Body {
             error: Detail {
                 code: self.code,
-                message: &self.message,
-                field: self.field.as_deref(),
+                message: &message,
+                field: field.as_deref(),
             },
         };
         let mut response = (self.status, Json(body)).into_response();
@@ -263,6 +285,26 @@ mod tests {
         assert_eq!((e.status.as_u16(), e.code), (422, "infeasible"));
         let e: ApiError = crate::Error::Cancelled("deadline".into()).into();
         assert_eq!((e.status.as_u16(), e.code), (503, "deadline_exceeded"));
+    }
+
+    #[tokio::test]
+    async fn quoted_client_text_is_cut_to_a_bounded_answer() {
+        let key = "é".repeat(1 << 20);
+        let e = ApiError::invalid(key.clone(), format!("unknown field `{key}`"));
+        let bytes = axum::body::to_bytes(e.into_response().into_body(), 1 << 16)
+            .await
+            .unwrap();
+        assert!(
+            bytes.len() < 2 * (MAX_MESSAGE_BYTES + MAX_FIELD_BYTES),
+            "{}",
+            bytes.len()
+        );
+        let v: serde_json::Value = serde_json::from_slice(&bytes).unwrap();
+        let message = v["error"]["message"].as_str().unwrap();
+        assert!(
+            message.ends_with(&format!("… ({} bytes in all)", key.len() + 16)),
+            "{message}"
+        );
     }
 
     #[tokio::test]

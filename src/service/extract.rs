@@ -90,22 +90,55 @@ pub async fn within_body_time<T>(
 /// Parse JSON bytes into `T`: syntax errors → 400 `malformed_json`, shape
 /// errors and duplicate keys → 422 `invalid_input` naming the JSON path.
 pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
-    if let Some(d) = crate::strict_json::find_duplicate_key(bytes) {
-        return Err(ApiError::invalid(d.path.clone(), d.to_string()));
+    parse_json_until(bytes, &|| false)
+}
+
+/// [`parse_json`] inside a request's job: the duplicate-key walk gives up
+/// with 503 `deadline_exceeded` once `stop()` says the job is over (the
+/// typed parse that follows is linear in the body and has no such check).
+pub fn parse_json_until<T: DeserializeOwned>(
+    bytes: &[u8],
+    stop: &dyn Fn() -> bool,
+) -> Result<T, ApiError> {
+    match crate::strict_json::find_duplicate_key_until(bytes, stop) {
+        Ok(None) => {}
+        Ok(Some(d)) => return Err(ApiError::invalid(d.path.clone(), d.to_string())),
+        Err(crate::strict_json::Stopped) => {
+            return Err(ApiError::deadline_exceeded(
+                "the deadline passed while the request body was being read",
+            ))
+        }
     }
+    parse_typed(bytes)
+}
+
+/// The typed half of [`parse_json`], for bytes already checked for
+/// duplicate keys.
+pub fn parse_typed<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
     let mut de = serde_json::Deserializer::from_slice(bytes);
-    let value = serde_path_to_error::deserialize(&mut de).map_err(path_error)?;
+    let value = serde_path_to_error::deserialize(&mut de).map_err(|e| path_error(e, bytes))?;
     de.end().map_err(|e| {
         ApiError::malformed_json(format!("trailing data after the JSON value: {e}"))
     })?;
     Ok(value)
 }
 
-/// Deserialize an already parsed JSON value into `T` (shape errors → 422).
-pub fn from_value<T: DeserializeOwned>(value: serde_json::Value) -> Result<T, ApiError> {
-    serde_path_to_error::deserialize(value).map_err(|e| {
-        let message = e.inner().to_string();
-        ApiError::invalid(field_of(&e.path().to_string(), &message), message)
+/// One member of an already parsed body (`field`, its raw JSON text) as
+/// `T`; errors name `field` and the path inside it (`camera.fx`).
+pub fn parse_member<T: DeserializeOwned>(
+    field: &str,
+    raw: &serde_json::value::RawValue,
+) -> Result<T, ApiError> {
+    let mut de = serde_json::Deserializer::from_str(raw.get());
+    serde_path_to_error::deserialize(&mut de).map_err(|e| {
+        let inner = e.path().to_string();
+        let message = crate::strict_json::message_of(e.inner());
+        let path = match inner.as_str() {
+            "" | "." => field.to_string(),
+            p if p.starts_with('[') => format!("{field}{p}"),
+            p => format!("{field}.{p}"),
+        };
+        ApiError::invalid(field_of(&path, &message), message)
     })
 }
 
@@ -122,28 +155,31 @@ fn field_of(path: &str, message: &str) -> String {
     }
 }
 
-fn path_error(e: serde_path_to_error::Error<serde_json::Error>) -> ApiError {
+/// The answer for a failed typed parse of `bytes`. serde_json classes a
+/// few type errors as syntax (a number where an enum's name goes: "expected
+/// value"); when the bytes are valid JSON it is the value that is wrong, so
+/// the answer is 422 naming the field, not 400.
+fn path_error(e: serde_path_to_error::Error<serde_json::Error>, bytes: &[u8]) -> ApiError {
     use serde_json::error::Category;
     let field = e.path().to_string();
     let inner = e.into_inner();
     match inner.classify() {
         Category::Data => {
-            let message = strip_position(&inner);
+            let message = crate::strict_json::message_of(&inner);
             ApiError::invalid(field_of(&field, &message), message)
+        }
+        Category::Syntax
+            if inner.to_string().starts_with("expected value")
+                && serde_json::from_slice::<serde::de::IgnoredAny>(bytes).is_ok() =>
+        {
+            ApiError::invalid(
+                field,
+                "not a value this field takes: see its type in api/openapi.yaml",
+            )
         }
         Category::Syntax | Category::Eof | Category::Io => {
             ApiError::malformed_json(format!("the body is not valid JSON: {inner}"))
         }
-    }
-}
-
-/// serde_json's data errors end with " at line L column C"; the field path
-/// says where, so keep the message short.
-fn strip_position(e: &serde_json::Error) -> String {
-    let text = e.to_string();
-    match text.rfind(" at line ") {
-        Some(i) => text[..i].to_string(),
-        None => text,
     }
 }
 
@@ -220,6 +256,19 @@ mod tests {
         assert_eq!(e.status.as_u16(), 400);
         let e = parse_json::<Thing>(br#"{"radius": 1e999, "items": []}"#).unwrap_err();
         assert_eq!(e.status.as_u16(), 400);
+        // Valid JSON that serde_json's enum reading calls a syntax error.
+        #[derive(Debug, Deserialize)]
+        #[allow(dead_code)]
+        enum Kind {
+            Rest,
+        }
+        #[derive(Debug, Deserialize)]
+        #[allow(dead_code)]
+        struct WithKind {
+            kind: Kind,
+        }
+        let e = parse_json::<WithKind>(br#"{"kind": 3}"#).unwrap_err();
+        assert_eq!((e.status.as_u16(), e.field.as_deref()), (422, Some("kind")));
         let ok = parse_json::<Thing>(br#" {"radius": 2.5, "items": [{"id": "a"}]} "#).unwrap();
         assert_eq!(ok.radius, 2.5);
     }

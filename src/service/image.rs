@@ -99,7 +99,7 @@ pub fn read_header(field: &str, bytes: &[u8], max_pixels: u64) -> Result<ImageHe
     }
     let decoder = ImageReader::with_format(Cursor::new(bytes), format)
         .into_decoder()
-        .map_err(|e| malformed_image(field, &e.to_string()))?;
+        .map_err(|e| malformed_image(field, crate::perception::image_error_words(&e)))?;
     let (width, height) = decoder.dimensions();
     let pixels = u64::from(width) * u64::from(height);
     if pixels == 0 {
@@ -133,7 +133,7 @@ fn decode_with(field: &str, bytes: &[u8], header: &ImageHeader) -> Result<Dynami
     reader.limits(limits);
     reader
         .decode()
-        .map_err(|e| malformed_image(field, &e.to_string()))
+        .map_err(|e| malformed_image(field, crate::perception::image_error_words(&e)))
 }
 
 /// Whether a JPEG ends with its EOI marker (trailing zero padding allowed).

@@ -75,6 +75,10 @@ pub fn router(state: AppState) -> Router {
         .layer(DefaultBodyLimit::max(state.config().body_limit_bytes))
         .layer(from_fn_with_state(
             state.clone(),
+            server::layers::declared_length_gate,
+        ))
+        .layer(from_fn_with_state(
+            state.clone(),
             server::layers::shutdown_gate,
         ))
         .layer(from_fn_with_state(state.clone(), server::layers::track))

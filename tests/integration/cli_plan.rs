@@ -345,9 +345,13 @@ fn without_depth_the_box_only_model_plans_and_the_default_says_so() {
     assert_eq!(o.status.code(), Some(2));
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(
-        err.contains("depth") && err.contains("models/rgb-only"),
+        err.contains("--depth")
+            && err.contains("--target-position")
+            && err.contains("models/rgb-only"),
         "{err}"
     );
+    // The CLI's own words, not the HTTP field names.
+    assert!(!err.contains("depth_base64"), "{err}");
 }
 
 /// `dpmp eval` of the shipped model on `data` (plus `extra` flags), its

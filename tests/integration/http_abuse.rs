@@ -391,3 +391,104 @@ fn a_truncated_jpeg_is_refused_over_http() {
     );
     assert_eq!(field(&answer), Some("image_base64"));
 }
+
+/// Invented methods (any token is a valid HTTP method) count as `other`:
+/// the metrics' label set stays closed, whatever clients send.
+#[test]
+fn invented_methods_do_not_grow_the_metrics() {
+    let server = start(test_config());
+    for k in 0..20 {
+        let method = format!("X{}{k}", "M".repeat(2000));
+        let mut s = connect(server.addr());
+        let _ = write!(
+            s,
+            "{method} /healthz HTTP/1.1\r\nhost: x\r\nconnection: close\r\n\r\n"
+        );
+        let (status, _) = parse_answer(&read_all(s));
+        assert_eq!(status, 405);
+    }
+    let text = client()
+        .get(server.url("/metrics"))
+        .send()
+        .unwrap()
+        .text()
+        .unwrap();
+    assert!(!text.contains("MMMM"), "an invented method became a label");
+    assert!(
+        text.contains(
+            r#"dpmp_http_requests_total{route="/healthz",method="other",status="405"} 20"#
+        ),
+        "{text}"
+    );
+}
+
+/// A declared body over the limit is refused from the head, at once.
+#[test]
+fn a_declared_body_over_the_limit_is_413_without_waiting_for_it() {
+    let server = start(test_config().with_body_limit(1 << 20));
+    let mut s = connect(server.addr());
+    let t0 = Instant::now();
+    let _ = write!(
+        s,
+        "POST /v1/optimize HTTP/1.1\r\nhost: x\r\ncontent-type: application/json\r\ncontent-length: {}\r\n\r\n{{",
+        2 << 20
+    );
+    let raw = read_all(s);
+    let (status, body) = parse_answer(&raw);
+    assert_eq!((status, code(&body)), (413, "body_too_large"), "{raw}");
+    // Not after the body timeout (30 s) or the deadline (60 s).
+    assert!(t0.elapsed() < Duration::from_secs(5), "{:?}", t0.elapsed());
+}
+
+/// The ends hyper answers with silence get an answer: HTTP/2 with prior
+/// knowledge a GOAWAY(HTTP_1_1_REQUIRED), a head cut by the header timeout
+/// a JSON 408; a connection that never sent a byte is closed quietly.
+#[test]
+fn http2_prefaces_and_cut_heads_get_an_answer() {
+    let mut config = test_config();
+    config.header_read_timeout = Duration::from_millis(300);
+    let server = start(config);
+    let mut s = connect(server.addr());
+    s.write_all(b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n\x00\x00\x00\x04\x00\x00\x00\x00\x00")
+        .unwrap();
+    let mut frames = Vec::new();
+    let _ = s.read_to_end(&mut frames);
+    assert!(frames.len() > 18, "{frames:?}");
+    assert_eq!(frames[3], 4, "a SETTINGS frame first");
+    assert_eq!(
+        (frames[12], &frames[22..26]),
+        (7, &[0u8, 0, 0, 0xd][..]),
+        "then GOAWAY(HTTP_1_1_REQUIRED)"
+    );
+    let debug: Value = serde_json::from_slice(&frames[26..]).unwrap();
+    assert_eq!(debug["error"]["code"], "http2_not_supported");
+
+    let mut s = connect(server.addr());
+    s.write_all(b"GET /healthz HTTP/1.1\r\nhost: x\r\n")
+        .unwrap();
+    let (status, body) = parse_answer(&read_all(s));
+    assert_eq!((status, code(&body)), (408, "header_timeout"), "{body}");
+
+    let idle = connect(server.addr());
+    assert_eq!(read_all(idle), "");
+}
+
+/// `DPMP_API_TOKEN=""` does not serve without auth: `dpmp serve` refuses
+/// it with exit code 2, naming the variable.
+#[test]
+fn an_empty_token_variable_stops_the_service_from_starting() {
+    for blank in ["", "   "] {
+        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_dpmp"))
+            .args(["serve", "--addr", "127.0.0.1:0", "--no-model"])
+            .env("DPMP_API_TOKEN", blank)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let code = exit_within(&mut child, Duration::from_secs(60));
+        let mut stderr = String::new();
+        let _ = child.stderr.take().unwrap().read_to_string(&mut stderr);
+        assert_eq!(code, Some(2), "{blank:?}: {stderr}");
+        assert!(stderr.contains("DPMP_API_TOKEN"), "{stderr}");
+    }
+}

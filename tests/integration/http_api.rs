@@ -452,3 +452,86 @@ fn metrics_text(c: &reqwest::blocking::Client, server: &dpmp::service::RunningSe
         .text()
         .unwrap()
 }
+
+/// What an outside probe found, each answered in the client's own terms:
+/// the prior in one form only, no Rust type or decoder internals in a
+/// message, a goal out of reach named as such, no path on the open
+/// `/readyz`.
+#[test]
+fn answers_speak_the_clients_terms() {
+    let server = start_with_default_model();
+    let c = client();
+    let url = server.url("/v1/optimize");
+    let request = typical_request(2);
+    let prior = request["prior"].clone();
+    // Both forms at once, an unknown key, an empty annotation.
+    let mut both = prior.clone();
+    both["annotation"] = json!([]);
+    let mut unknown = prior.clone();
+    unknown["weights"] = json!([1.0]);
+    for (bad, words) in [
+        (both, "not both"),
+        (unknown, "unknown field `weights`"),
+        (json!({"annotation": []}), "7"),
+    ] {
+        let mut r = request.clone();
+        r["prior"] = bad;
+        let (s, body) = post_json(&c, &url, r.to_string());
+        assert_eq!(
+            (s, field(&body).map(|f| f.starts_with("prior"))),
+            (422, Some(true)),
+            "{body}"
+        );
+        let message = body["error"]["message"].as_str().unwrap();
+        assert!(message.contains(words), "{message}");
+    }
+    // Wrong top-level shapes name no Rust type.
+    for bad in ["[]", "7", "{\"goal\": 3}", "{\"boundary\": 3}"] {
+        let (s, body) = post_json(&c, &url, bad);
+        assert_eq!(s, 422, "{bad}: {body}");
+        let message = body["error"]["message"].as_str().unwrap();
+        for internal in ["struct", "enum", "Wire", "Spec"] {
+            assert!(!message.contains(internal), "{bad}: {message}");
+        }
+    }
+    // A goal the arm cannot reach: proven infeasible with the reason, not
+    // a numerical failure.
+    let mut far = request.clone();
+    far["goal"] = json!({"position": [4.0, 0.0, 0.5]});
+    let (s, body) = post_json(&c, &url, far.to_string());
+    assert_eq!(
+        (s, body["status"].as_str()),
+        (200, Some("infeasible")),
+        "{body}"
+    );
+    assert!(body["reason"].as_str().unwrap().contains("reach"), "{body}");
+    // A corrupt PNG: what is wrong, not the decoder's debug text.
+    let png = {
+        let mut out = std::io::Cursor::new(Vec::new());
+        image::DynamicImage::ImageRgb8(image::RgbImage::new(640, 480))
+            .write_to(&mut out, image::ImageFormat::Png)
+            .unwrap();
+        let mut bytes = out.into_inner();
+        let n = bytes.len();
+        for b in &mut bytes[60..n - 20] {
+            *b ^= 0x5a;
+        }
+        bytes
+    };
+    use base64::Engine as _;
+    let plan = json!({
+        "image_base64": base64::engine::general_purpose::STANDARD.encode(&png),
+        "target_box": [300, 200, 340, 250],
+        "target_position": [0.6, 0.05, 0.55],
+    });
+    let (s, body) = post_json(&c, &server.url("/v1/plan"), plan.to_string());
+    assert_eq!((s, code(&body)), (400, "malformed_image"), "{body}");
+    let message = body["error"]["message"].as_str().unwrap();
+    assert!(
+        !message.contains('{') && !message.contains("Chunk"),
+        "{message}"
+    );
+    // The open readiness probe names the model's folder, not its path.
+    let (_, ready) = status_and_json(c.get(server.url("/readyz")).send().unwrap());
+    assert_eq!(ready["model"]["source"], json!("default"), "{ready}");
+}

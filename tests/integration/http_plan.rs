@@ -334,6 +334,34 @@ fn bad_depth_inputs_are_422_naming_the_field() {
             "{extra}: {answer}"
         );
     }
+    // A berry out of the arm's reach is named by the field it came from,
+    // before any numerics: depth of 30 m everywhere, a scale 1000x too
+    // large, a client position 4 m away.
+    let far_cases = [
+        (
+            "depth_base64",
+            json!({"depth_base64": b64(&png16(640, 480, 30_000))}),
+        ),
+        (
+            "depth_scale_m",
+            json!({"depth_base64": b64(&depth), "depth_scale_m": 1.0}),
+        ),
+        (
+            "target_position",
+            json!({"target_position": [4.0, 0.0, 0.5]}),
+        ),
+    ];
+    for (expected, extra) in far_cases {
+        let mut body = base.clone();
+        for (k, v) in extra.as_object().unwrap() {
+            body[k] = v.clone();
+        }
+        let (s, answer) = post_json(&c, &url, body.to_string());
+        assert_eq!((s, field(&answer)), (422, Some(expected)), "{answer}");
+        let message = answer["error"]["message"].as_str().unwrap();
+        assert!(message.contains("beyond its reach (1.09 m)"), "{message}");
+        assert_eq!(code(&answer), "invalid_input", "{answer}");
+    }
 }
 
 #[test]

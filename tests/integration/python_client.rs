@@ -129,3 +129,57 @@ fn the_python_client_optimizes_plans_and_raises_the_servers_errors() {
     );
     server.shutdown().unwrap();
 }
+
+/// A service that is not there is a `DpmpError` with code `unreachable`
+/// naming the URL, not urllib's own exception.
+#[test]
+fn the_python_client_says_when_the_service_cannot_be_reached() {
+    let Some(python) = python3() else {
+        eprintln!("SKIPPED: no python3 on this machine; the Python client was not run");
+        return;
+    };
+    // A port nothing listens on: bound, then closed.
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let clients = Path::new(env!("CARGO_MANIFEST_DIR")).join("clients/python");
+    let script = r#"
+import json, sys
+sys.path.insert(0, sys.argv[1])
+from dpmp_client import Client, DpmpError
+try:
+    Client(sys.argv[2]).robot()
+    print(json.dumps({"raised": None}))
+except DpmpError as e:
+    print(json.dumps({"raised": "DpmpError", "status": e.status, "code": e.code,
+                      "message": e.message, "cause": type(e.__cause__).__name__}))
+"#;
+    let out = Command::new(python)
+        .args([
+            "-c",
+            script,
+            &clients.display().to_string(),
+            &format!("http://127.0.0.1:{port}"),
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let seen: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(seen["raised"], "DpmpError", "{seen}");
+    assert_eq!(
+        (seen["status"].clone(), seen["code"].as_str()),
+        (Value::Null, Some("unreachable"))
+    );
+    let message = seen["message"].as_str().unwrap();
+    assert!(
+        message.contains(&format!("127.0.0.1:{port}")) && message.contains("refused"),
+        "{message}"
+    );
+    assert_eq!(seen["cause"], "URLError");
+}

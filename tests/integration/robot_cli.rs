@@ -79,6 +79,36 @@ fn clearance_reports_the_closest_obstacle() {
     );
 }
 
+/// The shipped example scene works as the README says, and a request file's
+/// obstacles are the same scene.
+#[test]
+fn clearance_takes_the_example_scene_and_a_request_file() {
+    let example = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/scene.json");
+    let (code, from_scene, err) = dpmp(&["robot", "clearance", "--q", HOME, "--scene", example]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        from_scene["min_clearance_m"].as_f64().unwrap() > 0.0,
+        "{from_scene}"
+    );
+    let scene: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(example).unwrap()).unwrap();
+    let mut request = crate::common::requests::typical_json(1, &Default::default());
+    request["obstacles"] = scene["obstacles"].clone();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("req.json");
+    std::fs::write(&path, request.to_string()).unwrap();
+    let (code, from_request, err) = dpmp(&[
+        "robot",
+        "clearance",
+        "--q",
+        HOME,
+        "--scene",
+        path.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(from_request, from_scene);
+}
+
 #[test]
 fn bad_flags_are_invalid_input() {
     let (code, _, err) = dpmp(&["robot", "fk", "--q", "0,0,0"]);

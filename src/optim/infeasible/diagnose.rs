@@ -4,7 +4,7 @@
 use crate::optim::problem::Problem;
 use crate::optim::tolerances::FEASIBILITY_TOLERANCE;
 use crate::robot::{IkOptions, IkTarget};
-use nalgebra::{Point3, Vector3};
+use nalgebra::Point3;
 
 impl Problem {
     /// Why the problem is infeasible before any solve, if it evidently is:
@@ -68,9 +68,9 @@ impl Problem {
         if let Some(reason) = self.goal_buried(&p, goal.tolerance_m) {
             return Some(reason);
         }
-        let (shoulder, reach) = self.reach_bound();
-        let distance = (p.coords - shoulder).norm();
-        if distance > reach + goal.tolerance_m {
+        let bound = self.robot.reach();
+        let (distance, reach) = (bound.distance(&goal.position), bound.radius);
+        if !bound.holds(&goal.position, goal.tolerance_m) {
             return Some(format!(
                 "goal: out of reach, {distance:.3} m from the shoulder, the arm reaches at most {reach:.3} m"
             ));
@@ -120,22 +120,6 @@ impl Problem {
             .ok()
             .and_then(|s| s.min_clearance(&self.robot, &self.robot.fk(&home)))
             .map_or(0.0, |c| c.distance)
-    }
-
-    /// Shoulder position and an upper bound on the TCP's distance from it:
-    /// the sum of the constant distances between consecutive link origins
-    /// from the first moving link to the tip.
-    fn reach_bound(&self) -> (Vector3<f64>, f64) {
-        let frames = self.robot.fk(&self.robot.home());
-        let origins: Vec<Vector3<f64>> =
-            frames.poses.iter().map(|f| f.translation.vector).collect();
-        let first = origins.iter().position(|o| o.norm() > 1e-9).unwrap_or(0);
-        let shoulder = origins.get(first).copied().unwrap_or_else(Vector3::zeros);
-        let tip = self.robot.tcp_link().min(origins.len().saturating_sub(1));
-        let reach = (first..tip)
-            .map(|i| (origins[i + 1] - origins[i]).norm())
-            .sum();
-        (shoulder, reach)
     }
 
     /// Inverse kinematics from the prior mean's final configuration, the

@@ -2,13 +2,16 @@
 //! ([`super::task`]'s goal, boundary and solver knobs), the request's size
 //! limits, and (`validate`) its validation into a [`Problem`](super::Problem).
 
+mod prior;
 mod validate;
+
+pub use prior::MAX_WEIGHTS;
 
 pub use validate::check_prior;
 pub(crate) use validate::validate_spec;
 
 pub use super::report::TrajectoryFormat;
-use super::task::{Boundary, Goal, SolverOptions, Waypoint};
+use super::task::{Boundary, Goal, SolverOptions, Waypoint, MAX_JOINTS, MAX_VIA_POINTS};
 use crate::promp::annotation::JointAnnotation;
 use crate::promp::PrompConfig;
 use crate::scene::Obstacle;
@@ -79,13 +82,17 @@ task_and_wire_request! {
         #[serde(default = "default_duration")]
         pub duration_s: f64,
         /// Required configuration at t = 0.
-        #[serde(default)]
+        #[serde(default, deserialize_with = "crate::strict_json::option_vec_at_most::<_, _, MAX_JOINTS>")]
         pub start: Option<Vec<f64>>,
         /// Required TCP position at the end.
         #[serde(default)]
         pub goal: Option<Goal>,
         /// Configurations the trajectory passes through (exactly) on its way.
-        #[serde(default, skip_serializing_if = "Vec::is_empty")]
+        #[serde(
+            default,
+            skip_serializing_if = "Vec::is_empty",
+            deserialize_with = "crate::strict_json::vec_at_most::<_, _, MAX_VIA_POINTS>"
+        )]
         pub via_points: Vec<Waypoint>,
         /// The scene.
         #[serde(default)]
@@ -111,10 +118,18 @@ task_and_wire_request! {
         pub boundary: Boundary,
         /// Per-joint acceleration limits (rad/s²); default: the robot's
         /// (`joint_limits.yaml` beside its URDF).
-        #[serde(default, skip_serializing_if = "Option::is_none")]
+        #[serde(
+            default,
+            skip_serializing_if = "Option::is_none",
+            deserialize_with = "crate::strict_json::option_vec_at_most::<_, _, MAX_JOINTS>"
+        )]
         pub acceleration_limits: Option<Vec<f64>>,
         /// Per-joint jerk limits (rad/s³); default: the robot's.
-        #[serde(default, skip_serializing_if = "Option::is_none")]
+        #[serde(
+            default,
+            skip_serializing_if = "Option::is_none",
+            deserialize_with = "crate::strict_json::option_vec_at_most::<_, _, MAX_JOINTS>"
+        )]
         pub jerk_limits: Option<Vec<f64>>,
         /// Factor in (0, 1] on every velocity limit (MoveIt's
         /// `max_velocity_scaling_factor`).
@@ -164,8 +179,9 @@ fn default_duration() -> f64 {
 fn default_clearance() -> f64 {
     0.02
 }
-/// The prior: a full Gaussian or the paper's per-joint annotation.
-#[derive(Clone, Debug, Serialize, Deserialize)]
+/// The prior: a full Gaussian or the paper's per-joint annotation (read
+/// by `prior`: exactly one form, lengths capped).
+#[derive(Clone, Debug, Serialize)]
 #[serde(untagged)]
 pub enum PriorSpec {
     /// `{"mean": [...], "cov": [[...]]}`, joint-major.

@@ -251,15 +251,20 @@ pub(crate) fn derivative_matrices(
 
 /// A scaling factor must be in (0, 1].
 fn check_scaling(field: &str, value: f64) -> Result<()> {
-    if value.is_finite() && value > 0.0 && value <= 1.0 {
+    if value.is_finite() && (MIN_SCALING..=1.0).contains(&value) {
         Ok(())
     } else {
         Err(Error::invalid(
             field,
-            format!("must be a number in (0, 1], got {value}"),
+            format!("must be a number in [{MIN_SCALING}, 1], got {value:e}"),
         ))
     }
 }
+
+/// Smallest accepted `velocity_scaling` / `acceleration_scaling`: a
+/// thousandth of the robot's limits (smaller ones make every limit ratio
+/// overflow, and no motion of a sensible duration meets them).
+pub const MIN_SCALING: f64 = 1e-3;
 
 /// One positive finite number per joint.
 fn check_positive_per_joint(field: &str, values: &[f64], dof: usize) -> Result<()> {

@@ -55,9 +55,19 @@ pub struct ModelStatus {
     pub loaded: bool,
     /// Its name.
     pub name: Option<String>,
-    /// Where it was loaded from: its folder, or `shipped` (the model the
-    /// binary carries); `null` without a model (`--no-model`).
+    /// Where it was loaded from: `shipped` (the model the binary carries)
+    /// or the name of its folder (never the path: `/readyz` is open);
+    /// `null` without a model (`--no-model`).
     pub source: Option<String>,
+}
+
+/// What an open route may say of a model's source: `shipped`, or the last
+/// component of its folder.
+pub fn public_source(source: &str) -> String {
+    std::path::Path::new(source)
+        .file_name()
+        .map(|name| name.to_string_lossy().into_owned())
+        .unwrap_or_else(|| source.to_string())
 }
 
 /// `GET /readyz`: 200 when ready, 503 with the same body otherwise.
@@ -84,8 +94,21 @@ pub async fn readyz(State(state): State<AppState>) -> (StatusCode, Json<Readines
             model: ModelStatus {
                 loaded: model.is_some(),
                 name: model.as_ref().map(|m| m.name().to_string()),
-                source: model.map(|m| m.source().to_string()),
+                source: model.map(|m| public_source(m.source())),
             },
         }),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_open_source_names_no_path() {
+        assert_eq!(public_source("shipped"), "shipped");
+        assert_eq!(public_source("/home/me/models/my-model"), "my-model");
+        assert_eq!(public_source("/home/me/models/my-model/"), "my-model");
+        assert_eq!(public_source("models/rgb-only"), "rgb-only");
+    }
 }

@@ -8,7 +8,9 @@ use crate::optim::{
 };
 use crate::service::config::ServiceConfig;
 use crate::service::error::ApiError;
-use crate::service::extract::{media_type, parse_json, read_body, within_body_time, MediaType};
+use crate::service::extract::{
+    media_type, parse_json_until, read_body, within_body_time, MediaType,
+};
 use crate::service::limits::Job;
 use crate::service::state::AppState;
 use axum::extract::{Request, State};
@@ -30,7 +32,7 @@ pub async fn optimize(
     let response = state
         .limiter()
         .run(deadline, move |job| -> Result<OptimizeResponse, ApiError> {
-            let request: OptimizeRequest = parse_json(&bytes)?;
+            let request: OptimizeRequest = parse_json_until(&bytes, &|| job.should_stop())?;
             check_request_limits(&config, &request.task)?;
             Ok(optimize_with(&request, &robot, &solve_control(job))?)
         })

@@ -31,7 +31,7 @@ use crate::plan::{
 use crate::service::config::ServiceConfig;
 use crate::service::error::ApiError;
 use crate::service::extract::{
-    from_value, media_type, parse_json, read_body, within_body_time, MediaType,
+    media_type, parse_json_until, parse_member, parse_typed, read_body, within_body_time, MediaType,
 };
 use crate::service::image::{
     decode_base64, decode_image_within, read_header, DecodeBudget, Reservation,
@@ -42,7 +42,8 @@ use axum::extract::{FromRequest, Multipart, Request, State};
 use axum::http::StatusCode;
 use axum::Json;
 use image::DynamicImage;
-use serde_json::{Map, Value};
+use serde_json::value::RawValue;
+use std::collections::BTreeMap;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -59,6 +60,11 @@ const TARGET_FIELD: &str = "target_position";
 const STANDOFF_FIELD: &str = "goal_standoff_m";
 const CAMERA_FIELD: &str = "camera";
 const WORLD_FIELD: &str = "world";
+
+/// The members of a plan body, each kept as its raw JSON text and parsed
+/// on its own into its type: no value tree is built, so a body's memory is
+/// its size plus what its typed fields hold.
+type Fields = BTreeMap<String, Box<RawValue>>;
 
 /// A request as received, nothing parsed or decoded yet: that is CPU work
 /// and runs in the request's job.
@@ -118,7 +124,7 @@ pub async fn plan(
     let response = state
         .limiter()
         .run(deadline, move |job| -> Result<PlanResponse, ApiError> {
-            let (input, _held) = received.into_input(&decoding)?;
+            let (input, _held) = received.into_input(&decoding, &|| job.should_stop())?;
             check_request_limits(&decoding.config, input.task())?;
             let model = model.ok_or_else(ApiError::model_unavailable)?;
             Ok(predict_and_optimize(
@@ -176,10 +182,14 @@ async fn read_multipart(state: &AppState, request: Request) -> Result<Received, 
 impl Received {
     /// Parse and decode (in the request's job): the [`PlanRequest`] and the
     /// room its decoded images hold in the budget.
-    fn into_input(self, decoding: &Decoding) -> Result<(PlanRequest, Vec<Reservation>), ApiError> {
+    fn into_input(
+        self,
+        decoding: &Decoding,
+        stop: &dyn Fn() -> bool,
+    ) -> Result<(PlanRequest, Vec<Reservation>), ApiError> {
         let (encoded, fields) = match self {
             Received::Json(bytes) => {
-                let mut fields: Map<String, Value> = parse_json(&bytes)?;
+                let mut fields: Fields = parse_json_until(&bytes, stop)?;
                 let image = (
                     IMAGE_FIELD,
                     take_base64(&mut fields, IMAGE_FIELD)?.ok_or_else(|| {
@@ -197,7 +207,7 @@ impl Received {
                 let image = image.ok_or_else(|| malformed_multipart("missing the part `image`"))?;
                 let request =
                     request.ok_or_else(|| malformed_multipart("missing the part `request`"))?;
-                let fields: Map<String, Value> = parse_json(&request)?;
+                let fields: Fields = parse_json_until(&request, stop)?;
                 for (field, part) in [(IMAGE_FIELD, MULTIPART_IMAGE), (DEPTH_FIELD, DEPTH_PART)] {
                     if fields.contains_key(field) {
                         return Err(ApiError::invalid(
@@ -219,11 +229,14 @@ impl Received {
 
 /// A base64 string field taken out of `fields` and decoded (`None` when
 /// absent or null).
-fn take_base64(fields: &mut Map<String, Value>, field: &str) -> Result<Option<Vec<u8>>, ApiError> {
-    match fields.remove(field) {
-        None | Some(Value::Null) => Ok(None),
-        Some(Value::String(text)) => decode_base64(field, &text).map(Some),
-        Some(_) => Err(ApiError::invalid(field, "must be a base64 string")),
+fn take_base64(fields: &mut Fields, field: &str) -> Result<Option<Vec<u8>>, ApiError> {
+    let Some(raw) = fields.remove(field) else {
+        return Ok(None);
+    };
+    match serde_json::from_str::<Option<String>>(raw.get()) {
+        Ok(None) => Ok(None),
+        Ok(Some(text)) => decode_base64(field, &text).map(Some),
+        Err(_) => Err(ApiError::invalid(field, "must be a base64 string")),
     }
 }
 
@@ -249,7 +262,7 @@ fn malformed_multipart(message: &str) -> ApiError {
 fn finish_input(
     decoding: &Decoding,
     encoded: Encoded,
-    mut fields: Map<String, Value>,
+    mut fields: Fields,
 ) -> Result<(PlanRequest, Vec<Reservation>), ApiError> {
     if fields.contains_key("prior") {
         return Err(ApiError::invalid(
@@ -260,8 +273,8 @@ fn finish_input(
     let target_box = parse_box(fields.remove(BOX_FIELD))?;
     let mask_applied = match fields.remove(MASK_FIELD) {
         None => false,
-        Some(Value::Bool(b)) => b,
-        Some(_) => return Err(ApiError::invalid(MASK_FIELD, "must be true or false")),
+        Some(raw) => serde_json::from_str::<bool>(raw.get())
+            .map_err(|_| ApiError::invalid(MASK_FIELD, "must be true or false"))?,
     };
     let depth_scale_m = optional_number(&mut fields, SCALE_FIELD)?;
     if let Some(scale) = depth_scale_m {
@@ -272,7 +285,7 @@ fn finish_input(
     let approach = goal_approach(&mut fields)?;
     let camera = take_camera(&mut fields)?;
     let world = take_world(&mut fields)?;
-    let task: Task = from_value(Value::Object(fields))?;
+    let task: Task = parse_typed(object_text(&fields).as_bytes())?;
     let (image_field, image_bytes) = &encoded.image;
     let max_pixels = decoding.config.max_image_pixels;
     let (image, image_held) = decode_image_within(
@@ -315,25 +328,21 @@ fn finish_input(
 
 /// The optional `camera` (intrinsics and mount), parsed (its values are
 /// checked by [`PlanRequest::new`]).
-fn take_camera(fields: &mut Map<String, Value>) -> Result<Option<CameraModel>, ApiError> {
-    let Some(value) = fields.remove(CAMERA_FIELD) else {
+fn take_camera(fields: &mut Fields) -> Result<Option<CameraModel>, ApiError> {
+    let Some(raw) = fields.remove(CAMERA_FIELD) else {
         return Ok(None);
     };
-    let camera: CameraModel = serde_path_to_error::deserialize(value).map_err(|e| {
-        ApiError::invalid(
-            format!("{CAMERA_FIELD}.{}", e.path()),
-            e.inner().to_string(),
-        )
-    })?;
-    Ok(Some(camera))
+    parse_member(CAMERA_FIELD, &raw).map(Some)
 }
 
 /// The optional `world` (`"none"` or `"depth"`).
-fn take_world(fields: &mut Map<String, Value>) -> Result<WorldSource, ApiError> {
-    match fields.remove(WORLD_FIELD) {
-        None => Ok(WorldSource::None),
-        Some(Value::String(w)) => Ok(WorldSource::parse(&w, WORLD_FIELD)?),
-        Some(_) => Err(ApiError::invalid(
+fn take_world(fields: &mut Fields) -> Result<WorldSource, ApiError> {
+    let Some(raw) = fields.remove(WORLD_FIELD) else {
+        return Ok(WorldSource::None);
+    };
+    match serde_json::from_str::<String>(raw.get()) {
+        Ok(w) => Ok(WorldSource::parse(&w, WORLD_FIELD)?),
+        Err(_) => Err(ApiError::invalid(
             WORLD_FIELD,
             "must be the string \"none\" or \"depth\"",
         )),
@@ -342,19 +351,37 @@ fn take_world(fields: &mut Map<String, Value>) -> Result<WorldSource, ApiError> 
 
 /// A `goal` without a `position` (only with a derived goal): its approach
 /// direction, taken out of the request fields.
-fn goal_approach(fields: &mut Map<String, Value>) -> Result<Option<GoalApproach>, ApiError> {
-    match fields.get("goal") {
-        Some(Value::Object(goal)) if !goal.contains_key("position") => {
-            #[derive(serde::Deserialize)]
-            struct Field {
-                goal: GoalApproach,
-            }
-            let goal = fields.remove("goal").unwrap_or_default();
-            let field: Field = from_value(serde_json::json!({ "goal": goal }))?;
-            Ok(Some(field.goal))
-        }
-        _ => Ok(None),
+fn goal_approach(fields: &mut Fields) -> Result<Option<GoalApproach>, ApiError> {
+    let Some(raw) = fields.get("goal") else {
+        return Ok(None);
+    };
+    let has_position = match serde_json::from_str::<BTreeMap<String, Box<RawValue>>>(raw.get()) {
+        Ok(members) => members.contains_key("position"),
+        // Not an object: the optimiser's own parse names what is wrong.
+        Err(_) => return Ok(None),
+    };
+    if has_position {
+        return Ok(None);
     }
+    let raw = fields
+        .remove("goal")
+        .ok_or_else(|| ApiError::invalid("goal", "missing"))?;
+    parse_member("goal", &raw).map(Some)
+}
+
+/// The members as one JSON object's text (what remains for the optimiser).
+fn object_text(fields: &Fields) -> String {
+    let mut text = String::from("{");
+    for (i, (key, value)) in fields.iter().enumerate() {
+        if i > 0 {
+            text.push(',');
+        }
+        text.push_str(&serde_json::Value::from(key.as_str()).to_string());
+        text.push(':');
+        text.push_str(value.get());
+    }
+    text.push('}');
+    text
 }
 
 /// A 16-bit depth PNG of the image's size: the size checked from its header
@@ -388,24 +415,34 @@ fn decode_depth(
 }
 
 /// An optional finite number field.
-fn optional_number(fields: &mut Map<String, Value>, field: &str) -> Result<Option<f64>, ApiError> {
-    match fields.remove(field) {
-        None | Some(Value::Null) => Ok(None),
-        Some(Value::Number(n)) => match n.as_f64() {
-            Some(v) if v.is_finite() => Ok(Some(v)),
-            _ => Err(ApiError::invalid(field, "must be a finite number")),
-        },
-        Some(_) => Err(ApiError::invalid(field, "must be a number")),
+fn optional_number(fields: &mut Fields, field: &str) -> Result<Option<f64>, ApiError> {
+    let Some(raw) = fields.remove(field) else {
+        return Ok(None);
+    };
+    match serde_json::from_str::<Option<f64>>(raw.get()) {
+        Ok(Some(v)) if !v.is_finite() => Err(ApiError::invalid(field, "must be a finite number")),
+        Ok(v) => Ok(v),
+        Err(_) => Err(ApiError::invalid(field, "must be a number")),
     }
 }
 
+/// A short list of numbers (at most 16: a box, a position).
+#[derive(serde::Deserialize)]
+struct Numbers(#[serde(deserialize_with = "crate::strict_json::vec_at_most::<_, _, 16>")] Vec<f64>);
+
+/// The numbers of `raw`, errors naming `field`.
+fn numbers(field: &str, raw: &RawValue) -> Result<Vec<f64>, ApiError> {
+    serde_json::from_str::<Numbers>(raw.get())
+        .map(|n| n.0)
+        .map_err(|e| ApiError::invalid(field, crate::strict_json::message_of(&e)))
+}
+
 /// The optional `target_position` `[x, y, z]` (m, base frame).
-fn optional_position(fields: &mut Map<String, Value>) -> Result<Option<[f64; 3]>, ApiError> {
-    let Some(value) = fields.remove(TARGET_FIELD).filter(|v| !v.is_null()) else {
+fn optional_position(fields: &mut Fields) -> Result<Option<[f64; 3]>, ApiError> {
+    let Some(raw) = fields.remove(TARGET_FIELD).filter(|v| v.get() != "null") else {
         return Ok(None);
     };
-    let numbers: Vec<f64> =
-        from_value::<Vec<f64>>(value).map_err(|e| ApiError::invalid(TARGET_FIELD, e.message))?;
+    let numbers = numbers(TARGET_FIELD, &raw)?;
     let p: [f64; 3] = numbers.as_slice().try_into().map_err(|_| {
         ApiError::invalid(
             TARGET_FIELD,
@@ -415,15 +452,14 @@ fn optional_position(fields: &mut Map<String, Value>) -> Result<Option<[f64; 3]>
     Ok(Some(p))
 }
 
-fn parse_box(value: Option<Value>) -> Result<[f64; 4], ApiError> {
-    let value = value.ok_or_else(|| {
+fn parse_box(raw: Option<Box<RawValue>>) -> Result<[f64; 4], ApiError> {
+    let raw = raw.ok_or_else(|| {
         ApiError::invalid(
             BOX_FIELD,
             "missing: the target box [x1, y1, x2, y2] in pixels",
         )
     })?;
-    let numbers: Vec<f64> =
-        from_value::<Vec<f64>>(value).map_err(|e| ApiError::invalid(BOX_FIELD, e.message))?;
+    let numbers = numbers(BOX_FIELD, &raw)?;
     let b: [f64; 4] = numbers.as_slice().try_into().map_err(|_| {
         ApiError::invalid(
             BOX_FIELD,
@@ -437,18 +473,19 @@ fn parse_box(value: Option<Value>) -> Result<[f64; 4], ApiError> {
 mod tests {
     use super::*;
 
+    fn raw(text: &str) -> Option<Box<RawValue>> {
+        Some(RawValue::from_string(text.to_string()).unwrap())
+    }
+
     #[test]
     fn boxes_are_validated_naming_the_field() {
         assert_eq!(
-            parse_box(Some(serde_json::json!([1, 2, 3, 4]))).unwrap(),
+            parse_box(raw("[1, 2, 3, 4]")).unwrap(),
             [1.0, 2.0, 3.0, 4.0]
         );
-        for bad in [
-            serde_json::json!([1, 2, 3]),
-            serde_json::json!([1, 2, 3, "4"]),
-            serde_json::json!("box"),
-        ] {
-            let e = parse_box(Some(bad.clone())).unwrap_err();
+        let long = format!("[{}0]", "0,".repeat(100_000));
+        for bad in ["[1, 2, 3]", r#"[1, 2, 3, "4"]"#, r#""box""#, &long] {
+            let e = parse_box(raw(bad)).unwrap_err();
             assert_eq!(
                 (e.status.as_u16(), e.field.as_deref()),
                 (422, Some(BOX_FIELD)),

@@ -8,6 +8,9 @@
 //! - [`shutdown_gate`]: once a shutdown has begun, every route but
 //!   `/healthz` and `/readyz` answers 503 `shutting_down`, and every answer
 //!   carries `connection: close`.
+//! - [`declared_length_gate`]: a request whose `content-length` declares
+//!   more than the body limit is answered 413 `body_too_large` at once, from
+//!   its head, without waiting for a body that would be refused anyway.
 
 use crate::service::error::ApiError;
 use crate::service::state::{AppState, Arrival};
@@ -46,9 +49,55 @@ pub async fn shutdown_gate(
     response
 }
 
-/// Middleware: count every request by its route template (never the raw
-/// path, so label cardinality stays bounded; unknown routes count as
-/// `unmatched`).
+/// Answer 413 from the head when the declared body is over the limit (see
+/// the module docs); the connection closes, since the body is never read.
+pub async fn declared_length_gate(
+    State(state): State<AppState>,
+    request: Request,
+    next: Next,
+) -> Response {
+    let limit = state.config().body_limit_bytes;
+    if declared_length(request.headers()).is_some_and(|n| n > limit as u64) {
+        let mut response = ApiError::body_too_large(limit).into_response();
+        response
+            .headers_mut()
+            .insert(header::CONNECTION, HeaderValue::from_static("close"));
+        return response;
+    }
+    next.run(request).await
+}
+
+/// The body length a request's `content-length` header declares.
+fn declared_length(headers: &axum::http::HeaderMap) -> Option<u64> {
+    headers
+        .get(header::CONTENT_LENGTH)?
+        .to_str()
+        .ok()?
+        .trim()
+        .parse()
+        .ok()
+}
+
+/// The methods HTTP defines (RFC 9110 and PATCH): the `method` label's
+/// values besides `other`.
+const KNOWN_METHODS: [&str; 9] = [
+    "GET", "HEAD", "POST", "PUT", "DELETE", "CONNECT", "OPTIONS", "TRACE", "PATCH",
+];
+
+/// The `method` label of a request: its method when HTTP defines it, else
+/// `other` (a client may invent any token as a method; the label set must
+/// stay closed).
+pub fn method_label(method: &axum::http::Method) -> &'static str {
+    KNOWN_METHODS
+        .iter()
+        .find(|known| **known == method.as_str())
+        .copied()
+        .unwrap_or("other")
+}
+
+/// Middleware: count every request by its route template and
+/// [`method_label`] (never the raw path or method, so label cardinality
+/// stays bounded; unknown routes count as `unmatched`).
 pub async fn track(State(state): State<AppState>, request: Request, next: Next) -> Response {
     let started = Instant::now();
     let route = request
@@ -56,13 +105,28 @@ pub async fn track(State(state): State<AppState>, request: Request, next: Next) 
         .get::<MatchedPath>()
         .map(|p| p.as_str().to_string())
         .unwrap_or_else(|| "unmatched".to_string());
-    let method = request.method().as_str().to_string();
+    let method = method_label(request.method());
     let response = next.run(request).await;
     let status = response.status().as_u16();
     let seconds = started.elapsed().as_secs_f64();
     state
         .metrics()
-        .record_request(&route, &method, status, seconds);
+        .record_request(&route, method, status, seconds);
     tracing::info!(route = %route, method = %method, status, ms = seconds * 1e3, "request");
     response
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use axum::http::Method;
+
+    #[test]
+    fn method_labels_come_from_a_closed_set() {
+        assert_eq!(method_label(&Method::POST), "POST");
+        assert_eq!(method_label(&Method::PATCH), "PATCH");
+        let invented = Method::from_bytes("X".repeat(60_000).as_bytes()).unwrap();
+        assert_eq!(method_label(&invented), "other");
+        assert_eq!(method_label(&Method::from_bytes(b"get").unwrap()), "other");
+    }
 }

@@ -14,7 +14,9 @@
 //!   also between requests on a kept-alive connection); the body read
 //!   timeout and the request deadline are the handlers' ([`super::extract`]).
 //!   A request head over [`MAX_HEADER_BYTES`] is answered 431.
-//! - **Errors**: hyper's own 400/414/431 answers get the JSON error body
+//! - **Errors**: hyper's own 400/414/431 answers get the JSON error body,
+//!   and the ends hyper answers with silence (an HTTP/2 preface, a request
+//!   head cut by the header timeout) get an answer before the close
 //!   ([`json_errors`]).
 //! - **Shutdown**, in three phases: *serve* until the shutdown future
 //!   resolves; *drain*: `/readyz` answers 503 `shutting_down: true`, every
@@ -143,7 +145,10 @@ impl Acceptor {
     }
 }
 
-/// Serve one connection until it ends or the table evicts it.
+/// Serve one connection until it ends or the table evicts it; when hyper
+/// gives up without answering (an HTTP/2 preface, a head cut by the header
+/// timeout), send the connection's last word ([`json_errors`]) before
+/// closing.
 async fn serve_connection(
     stream: TcpStream,
     connection: Connection,
@@ -155,11 +160,11 @@ async fn serve_connection(
     let service = hyper::service::service_fn(move |request: hyper::Request<Incoming>| {
         let guard = BusyGuard::enter(&busy);
         let answer = hyper::service::Service::call(&router, request);
-        async move {
+        Box::pin(async move {
             let response = answer.await;
             drop(guard);
             response
-        }
+        })
     });
     let mut builder = hyper::server::conn::http1::Builder::new();
     builder
@@ -167,13 +172,30 @@ async fn serve_connection(
         .header_read_timeout(header_read_timeout)
         .max_header_size(MAX_HEADER_BYTES)
         .writev(false);
-    let conn = builder.serve_connection(TokioIo::new(JsonErrors::new(stream)), service);
-    tokio::pin!(conn);
-    tokio::select! {
-        result = conn.as_mut() => log_end(result),
-        _ = connection.evicted() => {
-            conn.as_mut().graceful_shutdown();
-            log_end(conn.await);
+    let mut conn = builder.serve_connection(TokioIo::new(JsonErrors::new(stream)), service);
+    let evicted = connection.evicted();
+    tokio::pin!(evicted);
+    let mut closing = false;
+    let result = std::future::poll_fn(|cx| {
+        if !closing && evicted.as_mut().poll(cx).is_ready() {
+            closing = true;
+            std::pin::Pin::new(&mut conn).graceful_shutdown();
+        }
+        conn.poll_without_shutdown(cx)
+    })
+    .await;
+    let end = match &result {
+        Err(e) if e.is_timeout() => json_errors::End::HeaderTimeout,
+        _ => json_errors::End::Other,
+    };
+    log_end(result);
+    let io = conn.into_parts().io.into_inner();
+    let last_word = io.last_word(end, header_read_timeout);
+    let mut stream = io.into_inner();
+    match last_word {
+        Some(bytes) => send_and_close(stream, &bytes).await,
+        None => {
+            let _ = tokio::time::timeout(REFUSAL_LINGER, stream.shutdown()).await;
         }
     }
 }
@@ -185,7 +207,7 @@ fn log_end(result: Result<(), hyper::Error>) {
 }
 
 /// Answer a connection refused at a cap with a JSON 503 and close it.
-async fn refuse(mut stream: TcpStream, refusal: Refusal) {
+async fn refuse(stream: TcpStream, refusal: Refusal) {
     let body = serde_json::json!({"error": {
         "code": "too_many_connections",
         "message": refusal.message(),
@@ -196,12 +218,17 @@ async fn refuse(mut stream: TcpStream, refusal: Refusal) {
         "HTTP/1.1 503 Service Unavailable\r\ncontent-type: application/json\r\ncontent-length: {}\r\nretry-after: 1\r\nconnection: close\r\n\r\n{body}",
         body.len()
     );
+    send_and_close(stream, answer.as_bytes()).await;
+}
+
+/// Write `bytes`, close the writing half and read what the client still
+/// sends, for at most [`REFUSAL_LINGER`]: closing with unread bytes makes
+/// the kernel reset the connection, and a reset can discard the answer
+/// before the client reads it.
+async fn send_and_close(mut stream: TcpStream, bytes: &[u8]) {
     let answer_and_drain = async {
-        stream.write_all(answer.as_bytes()).await?;
+        stream.write_all(bytes).await?;
         stream.shutdown().await?;
-        // Read what the client sent before closing: closing with unread
-        // bytes makes the kernel reset the connection, and a reset can
-        // discard the answer before the client reads it.
         let mut sink = [0u8; 4096];
         while stream.read(&mut sink).await? > 0 {}
         Ok::<(), std::io::Error>(())
@@ -209,7 +236,8 @@ async fn refuse(mut stream: TcpStream, refusal: Refusal) {
     let _ = tokio::time::timeout(REFUSAL_LINGER, answer_and_drain).await;
 }
 
-/// How long a refused connection is kept to deliver its answer.
+/// How long a refused (or last-worded) connection is kept to deliver its
+/// answer.
 const REFUSAL_LINGER: Duration = Duration::from_millis(500);
 
 /// Largest request head (request line and headers) read; larger → 431.

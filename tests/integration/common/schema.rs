@@ -33,8 +33,9 @@ pub fn validate(root: &Value, schema: &Value, value: &Value) -> Vec<String> {
 /// Keywords whose value is a map from names to schemas.
 const SCHEMA_MAPS: [&str; 3] = ["properties", "patternProperties", "$defs"];
 /// Keywords whose value is a schema or a list of schemas.
-const SUBSCHEMAS: [&str; 10] = [
+const SUBSCHEMAS: [&str; 11] = [
     "allOf",
+    "unevaluatedProperties",
     "anyOf",
     "oneOf",
     "not",
