@@ -300,13 +300,15 @@ fn check_goal(goal: &Goal) -> Result<()> {
                 format!("must be a unit vector (length within {APPROACH_AXIS_NORM_TOLERANCE} of 1), got length {norm}"),
             ));
         }
-        let tol = goal.approach_tolerance_rad;
-        if !(tol.is_finite() && tol > 0.0 && tol <= std::f64::consts::PI) {
-            return Err(Error::invalid(
-                "goal.approach_tolerance_rad",
-                format!("must be a number in (0, π], got {tol}"),
-            ));
-        }
+    }
+    // Checked with or without an axis: a value out of range is a mistake
+    // either way.
+    let tol = goal.approach_tolerance_rad;
+    if !(tol.is_finite() && tol > 0.0 && tol <= std::f64::consts::PI) {
+        return Err(Error::invalid(
+            "goal.approach_tolerance_rad",
+            format!("must be a number in (0, π], got {tol}"),
+        ));
     }
     Ok(())
 }
