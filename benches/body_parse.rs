@@ -7,7 +7,8 @@
 //!   element: 0.5 s and ~25 s).
 //! - `body_parse/optimize/*`: `parse_json::<OptimizeRequest>` (walk + typed
 //!   parse) of 16 MiB bodies: a flat prior mean, covariance rows of one, a
-//!   cloud obstacle's points, spheres, a long string. Each is refused or
+//!   cloud obstacle's points, spheres, objects of one key each, a long
+//!   string. Each is refused or
 //!   parsed; the bound is 100 ms of CPU for any of them.
 //!
 //! `cargo bench --bench body_parse`.
@@ -63,6 +64,10 @@ fn optimize_bodies(c: &mut Criterion) {
         (
             "spheres",
             format!(r#"{{"obstacles": {}}}"#, repeated(sphere, fill)),
+        ),
+        (
+            "one_key_objects",
+            format!(r#"{{"via_points": {}}}"#, repeated(r#"{"a":0}"#, fill)),
         ),
         (
             "long_string",

@@ -20,6 +20,7 @@ pub mod compiled;
 pub mod contact;
 pub mod distance;
 pub mod obstacle;
+pub mod obstacle_read;
 pub mod part_tree;
 pub mod round_contact;
 pub mod shape;

@@ -498,7 +498,11 @@ fn answers_speak_the_clients_terms() {
     let mut wide = request.clone();
     wide["goal"]["approach_tolerance_rad"] = json!(4.0);
     let (s, body) = post_json(&c, &url, wide.to_string());
-    assert_eq!((s, field(&body)), (422, Some("goal.approach_tolerance_rad")), "{body}");
+    assert_eq!(
+        (s, field(&body)),
+        (422, Some("goal.approach_tolerance_rad")),
+        "{body}"
+    );
     // A goal the arm cannot reach: proven infeasible with the reason, not
     // a numerical failure.
     let mut far = request.clone();

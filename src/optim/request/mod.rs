@@ -95,7 +95,10 @@ task_and_wire_request! {
         )]
         pub via_points: Vec<Waypoint>,
         /// The scene.
-        #[serde(default)]
+        #[serde(
+            default,
+            deserialize_with = "crate::strict_json::vec_at_most::<_, _, MAX_OBSTACLES>"
+        )]
         pub obstacles: Vec<Obstacle>,
         /// Required robot-obstacle clearance (m).
         #[serde(default = "default_clearance")]
