@@ -12,7 +12,9 @@
 //! {"id": "sensed", "type": "points", "points_base64": "<x, y, z as little-endian f32>", "radius": 0.005}
 //! ```
 //!
-//! Unknown fields are rejected; a box `rotation` defaults to identity.
+//! Unknown fields are rejected; a box `rotation` defaults to identity. A
+//! dataset's `"intruder": true` label is accepted and set aside (see
+//! [`super::obstacle_read`]), so every scene dPMP writes posts as it is.
 
 use crate::geometry::{midpoint, Capsule, OrientedBox, Primitive, Sphere};
 use crate::{Error, Result};

@@ -29,9 +29,15 @@ impl<'de> Deserialize<'de> for Obstacle {
     }
 }
 
-/// Most members an obstacle object may have (the berry's six fields, `id`
-/// and `type`).
-const MAX_OBSTACLE_MEMBERS: usize = 8;
+/// A dataset's label on an obstacle placed across the demonstrated path
+/// after the demonstrations (`dpmp data generate --intruders`): read and
+/// set aside, so that every scene dPMP writes can be posted as it is. The
+/// planner treats the obstacle like any other.
+pub const INTRUDER_FIELD: &str = "intruder";
+
+/// Most members an obstacle object may have (the berry's six fields, `id`,
+/// `type` and the `intruder` label).
+const MAX_OBSTACLE_MEMBERS: usize = 9;
 
 /// Most JSON values (numbers, strings, arrays, ... counted through their
 /// nesting) one member other than `points` may hold: a quaternion is 5.
@@ -79,6 +85,11 @@ impl<'de> serde::de::Visitor<'de> for MembersVisitor {
                     >::items(
                         MAX_CLOUD_POINTS
                     ))?)
+                }
+                INTRUDER_FIELD => {
+                    let _label: bool = map.next_value().map_err(|_| {
+                        A::Error::custom(format!("{INTRUDER_FIELD} must be true or false"))
+                    })?;
                 }
                 POINTS_BASE64_FIELD => {
                     members.points_base64 = Some(map.next_value().map_err(|_| {

@@ -203,3 +203,34 @@ fn http_plans_with_the_depth_world_and_refuses_it_without_depth() {
     };
     assert_eq!(refused(body, &clash), "world");
 }
+
+/// A record's scene, intruder labels and all, is posted as it is: the
+/// labels are set aside, every obstacle is planned around, and reading the
+/// record back keeps them.
+#[test]
+fn a_records_scene_posts_as_it_is_and_keeps_its_intruder_labels() {
+    let out = with_intruders(0);
+    let record = &out.records[0];
+    let text = serde_json::to_value(&record.scene).unwrap();
+    assert!(
+        text["obstacles"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|o| o["intruder"] == json!(true)),
+        "{text}"
+    );
+    let back: dpmp::synth::dataset::RecordScene = serde_json::from_value(text.clone()).unwrap();
+    assert_eq!(&back, &record.scene);
+    assert!(!back.intruders().is_empty());
+    // Into an optimise request as written.
+    let mut request = crate::common::requests::typical_json(1, &Default::default());
+    request["obstacles"] = text["obstacles"].clone();
+    request["start"] = json!(record.start);
+    request.as_object_mut().unwrap().remove("goal");
+    let parsed: dpmp::optim::OptimizeRequest = serde_json::from_value(request.clone()).unwrap();
+    assert_eq!(parsed.task.obstacles, record.scene.obstacles());
+    let server = start(test_config());
+    let (s, body) = post_json(&client(), &server.url("/v1/optimize"), request.to_string());
+    assert_eq!(s, 200, "{body}");
+}
