@@ -43,6 +43,8 @@
 //!   → prior → goal → optimiser pipeline behind `/v1/plan` and `dpmp plan`.
 //! - [`optim`] — the Mahalanobis-closest trajectory optimiser: a typed prior
 //!   beside an [`optim::Task`].
+//! - [`moveit`] — MoveIt's `PlanningScene` read into the request schema's
+//!   obstacles.
 //! - [`service`] — the axum HTTP service, a shell over [`plan`] and [`optim`].
 //! - `ros2` (cargo feature `ros2`) — the same planning as a native ROS 2
 //!   node: camera, joint-state and target topics in, a `JointTrajectory` and
@@ -78,6 +80,7 @@ pub mod error;
 pub mod fixtures;
 pub mod fsio;
 pub mod geometry;
+pub mod moveit;
 pub mod net;
 pub mod optim;
 pub mod perception;
