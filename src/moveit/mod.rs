@@ -11,6 +11,8 @@
 //! it handles more strictly than MoveIt (an allowed-collision entry between
 //! the robot and a world object) is said in the warnings.
 
+pub mod motion_plan_request;
 pub mod planning_scene;
 
+pub use motion_plan_request::{read_motion_plan_request, MoveItGoal, MoveItRequest};
 pub use planning_scene::{read_planning_scene, MoveItScene};

@@ -162,7 +162,7 @@ struct Pose {
 /// `[x, y, z]` or `{x, y, z}`.
 #[derive(Clone, Copy, Debug, Deserialize)]
 #[serde(untagged)]
-enum Xyz {
+pub(super) enum Xyz {
     List([f64; 3]),
     Map { x: f64, y: f64, z: f64 },
 }
@@ -170,13 +170,13 @@ enum Xyz {
 /// `[x, y, z, w]` or `{x, y, z, w}`.
 #[derive(Clone, Copy, Debug, Deserialize)]
 #[serde(untagged)]
-enum Xyzw {
+pub(super) enum Xyzw {
     List([f64; 4]),
     Map { x: f64, y: f64, z: f64, w: f64 },
 }
 
 impl Xyz {
-    fn array(self) -> [f64; 3] {
+    pub(super) fn array(self) -> [f64; 3] {
         match self {
             Xyz::List(v) => v,
             Xyz::Map { x, y, z } => [x, y, z],
@@ -189,7 +189,7 @@ impl Xyzw {
         Xyzw::List([0.0, 0.0, 0.0, 1.0])
     }
 
-    fn array(self) -> [f64; 4] {
+    pub(super) fn array(self) -> [f64; 4] {
         match self {
             Xyzw::List(v) => v,
             Xyzw::Map { x, y, z, w } => [x, y, z, w],
