@@ -14,14 +14,7 @@ use serde::{Deserialize, Deserializer};
 
 impl<'de> Deserialize<'de> for Obstacle {
     /// `id` plus the fields of one [`ObstacleShape`] variant; unknown fields
-    /// are rejected and errors mention the id.
-    ///
-    /// The members are read first (the id may come after the geometry),
-    /// each into the least it needs: `points` straight into its typed,
-    /// capped vector, `points_base64` into its string, every other member
-    /// into a small JSON value of at most [`MAX_MEMBER_VALUES`] values.
-    /// Then the shape is read from them. No member can make more than its
-    /// size allows, whatever the body says.
+    /// are rejected and errors mention the id (how: the module docs).
     fn deserialize<D: Deserializer<'de>>(deserializer: D) -> std::result::Result<Self, D::Error> {
         use serde::de::Error as _;
         let members = deserializer.deserialize_map(MembersVisitor)?;
