@@ -105,7 +105,7 @@ impl<T> JsonErrors<T> {
 }
 
 /// `{"error": {"code", "message", "field": null}}`.
-fn error_body(code: &str, message: &str) -> String {
+pub(super) fn error_body(code: &str, message: &str) -> String {
     serde_json::json!({"error": {"code": code, "message": message, "field": null}}).to_string()
 }
 

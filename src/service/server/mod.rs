@@ -208,12 +208,7 @@ fn log_end(result: Result<(), hyper::Error>) {
 
 /// Answer a connection refused at a cap with a JSON 503 and close it.
 async fn refuse(stream: TcpStream, refusal: Refusal) {
-    let body = serde_json::json!({"error": {
-        "code": "too_many_connections",
-        "message": refusal.message(),
-        "field": null,
-    }})
-    .to_string();
+    let body = json_errors::error_body("too_many_connections", refusal.message());
     let answer = format!(
         "HTTP/1.1 503 Service Unavailable\r\ncontent-type: application/json\r\ncontent-length: {}\r\nretry-after: 1\r\nconnection: close\r\n\r\n{body}",
         body.len()
