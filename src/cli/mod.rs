@@ -68,12 +68,13 @@ pub enum Command {
     Bench(bench::BenchArgs),
 }
 
-/// `Err(Unsolved)` (exit 3) when `required` and `status` is not `optimal`.
-pub fn require_optimal(required: bool, status: crate::optim::Status) -> crate::Result<()> {
-    if required && status != crate::optim::Status::Optimal {
+/// `Err(Unsolved)` (exit 3) when `required` and the answer that stopped
+/// for `stop` is not `optimal`.
+pub fn require_optimal(required: bool, stop: crate::optim::StopReason) -> crate::Result<()> {
+    if required && stop.status() != crate::optim::Status::Optimal {
         return Err(crate::Error::Unsolved(format!(
-            "the answer is `{}`, not `optimal` (--require-optimal)",
-            status.as_str()
+            "the answer is `{}` (stop_reason `{stop}`), not `optimal` (--require-optimal)",
+            stop.status().as_str()
         )));
     }
     Ok(())

@@ -40,7 +40,7 @@ pub fn run(args: OptimizeArgs) -> Result<()> {
         plot_response(plot, &problem, &response)?;
     }
     super::print_json(&response)?;
-    super::require_optimal(args.require_optimal, response.status)
+    super::require_optimal(args.require_optimal, response.stop_reason)
 }
 
 /// Parse a request file; malformed JSON or unknown fields are invalid input

@@ -161,7 +161,7 @@ pub fn run(args: PlanArgs) -> Result<()> {
         }
     }
     crate::cli::print_json(&response)?;
-    crate::cli::require_optimal(args.require_optimal, response.result.status)
+    crate::cli::require_optimal(args.require_optimal, response.result.stop_reason)
 }
 
 /// The model (`--model` or the shipped one) and the robot it was trained for.

@@ -49,6 +49,7 @@ pub mod request;
 pub mod scp;
 pub mod seeds;
 pub mod solution;
+pub mod stop_reason;
 pub mod task;
 pub mod tolerances;
 pub mod verify;
@@ -60,6 +61,7 @@ pub use report::{
 };
 pub use request::{OptimizeRequest, PriorSpec, Task};
 pub use solution::{Sharing, Solution, SolveControl, SolveStats};
+pub use stop_reason::{Interruption, StopReason};
 pub use task::{Boundary, Goal, GoalApproach, InnerSolver, SolverOptions, Waypoint};
 pub use tolerances::FEASIBILITY_TOLERANCE;
 
@@ -118,9 +120,11 @@ fn respond(
     warnings.append(&mut prior_mean_report.warnings);
     prior_mean_report.warnings = warnings;
     let mut response = if let Some(reason) = problem.diagnose() {
-        infeasible_at_prior_mean(&problem, mean, prior_mean_report, reason)
+        let proof = (StopReason::ProvenInfeasible, reason);
+        infeasible_at_prior_mean(&problem, mean, prior_mean_report, proof)
     } else if let Some(proof) = problem.duration_proof() {
-        let mut r = infeasible_at_prior_mean(&problem, mean, prior_mean_report, proof.reason);
+        let why = (StopReason::DurationTooShort, proof.reason);
+        let mut r = infeasible_at_prior_mean(&problem, mean, prior_mean_report, why);
         r.duration_lower_bound_s = proof.lower_bound_s;
         r.min_duration_s = verified_duration(task, validate, proof.lower_bound_s, ctl);
         r
@@ -133,6 +137,7 @@ fn respond(
         };
         OptimizeResponse {
             status: solution.status,
+            stop_reason: solution.stop_reason,
             trajectory: problem.trajectory(&solution.weights),
             mahalanobis: solution.mahalanobis,
             weights: solution.weights,
@@ -149,15 +154,16 @@ fn respond(
 }
 
 /// The answer for a request proven infeasible before any solve: the prior
-/// mean, its report, and why.
+/// mean, its report, and why (the proof's kind and its words).
 fn infeasible_at_prior_mean(
     problem: &Problem,
     mean: Vec<f64>,
     prior_mean_report: TrajectoryReport,
-    reason: String,
+    (stop_reason, reason): (StopReason, String),
 ) -> OptimizeResponse {
     OptimizeResponse {
-        status: Status::Infeasible,
+        status: stop_reason.status(),
+        stop_reason,
         mahalanobis: 0.0,
         trajectory: problem.trajectory(&mean),
         report: prior_mean_report.clone(),

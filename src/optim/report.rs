@@ -333,6 +333,9 @@ pub struct SampleResult {
 pub struct OptimizeResponse {
     /// Outcome.
     pub status: Status,
+    /// Why the solve ended where it did (`status` is
+    /// `stop_reason.status()`).
+    pub stop_reason: super::StopReason,
     /// Optimised weights, joint-major (the prior mean when infeasible
     /// before solving).
     pub weights: Vec<f64>,

@@ -6,6 +6,7 @@
 
 use super::qp::{QpFailure, QpSolution};
 use super::report::{Status, TrajectoryReport};
+use super::stop_reason::{Interruption, StopReason};
 use crate::Error;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::Arc;
@@ -47,16 +48,16 @@ impl SolveControl {
     }
 
     /// Why the solve must stop now, if it must.
-    pub fn stop_reason(&self) -> Option<&'static str> {
+    pub fn stop_reason(&self) -> Option<Interruption> {
         if self
             .cancel
             .as_ref()
             .is_some_and(|c| c.load(Ordering::Relaxed))
         {
-            return Some("cancelled by the caller");
+            return Some(Interruption::Cancelled);
         }
         if self.deadline.is_some_and(|d| Instant::now() >= d) {
-            return Some("deadline reached");
+            return Some(Interruption::Deadline);
         }
         None
     }
@@ -168,6 +169,8 @@ pub struct Solution {
     pub report: TrajectoryReport,
     /// Why the status is not `optimal`.
     pub reason: Option<String>,
+    /// Why the solve ended (its status is `stop_reason.status()`).
+    pub stop_reason: StopReason,
     /// Counters.
     pub stats: SolveStats,
 }

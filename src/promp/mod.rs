@@ -19,6 +19,8 @@
 //! - [`codec`] — the paper's `n(n+1)/2`-number LDLᵀ covariance code.
 //! - [`annotation`] — the paper's per-joint annotation files.
 //! - [`psd`] — symmetric positive semi-definite repair and factorisation.
+//! - [`smooth`] — the prior without demonstrations: integrated squared
+//!   acceleration, conditioned on the ends.
 
 pub mod annotation;
 pub mod basis;
@@ -28,6 +30,7 @@ pub mod config;
 pub mod distribution;
 pub mod fit;
 pub mod psd;
+pub mod smooth;
 pub mod task_condition;
 
 pub use annotation::Prior;

@@ -336,12 +336,14 @@ impl NodeState {
         };
         tracing::info!(
             status = result.status.as_str(),
+            stop_reason = result.stop_reason.as_str(),
             plan_ms = done.plan_ms,
             latency_ms,
             "planned"
         );
         let values = [
             ("status", result.status.as_str().to_string()),
+            ("stop_reason", result.stop_reason.as_str().to_string()),
             ("plan_ms", format!("{:.3}", done.plan_ms)),
             ("solve_ms", format!("{:.3}", result.report.solve_ms)),
             ("target_to_publish_ms", format!("{latency_ms:.3}")),

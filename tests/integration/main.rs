@@ -34,6 +34,7 @@ mod optim_exactness;
 mod optim_franka;
 mod optim_properties;
 mod optim_requests;
+mod optim_smooth_prior;
 mod optim_task;
 mod plan_interfaces;
 mod plan_world;

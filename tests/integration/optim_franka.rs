@@ -273,6 +273,7 @@ proptest! {
             return Ok(());
         };
         prop_assert_eq!(resp.status, Status::Infeasible);
+        prop_assert_eq!(resp.stop_reason, dpmp::optim::StopReason::DurationTooShort);
         let reason = resp.reason.clone().unwrap();
         prop_assert!(reason.starts_with("duration_s:"), "{}", reason);
         prop_assert!(bound >= duration);

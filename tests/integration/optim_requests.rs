@@ -8,6 +8,7 @@ use dpmp::fixtures::ExampleSettings;
 use dpmp::geometry::Sphere;
 use dpmp::optim::{
     optimize, optimize_with, OptimizeRequest, OptimizeResponse, PriorSpec, SolveControl, Status,
+    StopReason,
 };
 use dpmp::promp::annotation::joints_from_distribution;
 use dpmp::promp::codec::{decode_covariance, encode_covariance, DiagEncoding};
@@ -225,6 +226,7 @@ fn infeasible_cases_are_diagnosed_with_the_constraint() {
     r.task.start.as_mut().unwrap()[3] = 0.5;
     let resp = optimize(&r, &robot).unwrap();
     assert_eq!(resp.status, Status::Infeasible);
+    assert_eq!(resp.stop_reason, StopReason::ProvenInfeasible);
     assert!(
         resp.reason.as_deref().unwrap().contains("start[3]"),
         "{:?}",
@@ -377,6 +379,7 @@ fn a_cancelled_solve_stops_with_max_iterations_and_a_warning() {
     let mean_ok = problem.is_feasible(&resp.prior_mean_report);
     if !mean_ok {
         assert_eq!(resp.status, Status::MaxIterations);
+        assert_eq!(resp.stop_reason, StopReason::Cancelled);
         assert!(resp.report.warnings.iter().any(|w| w.contains("cancelled")));
     }
     let past = SolveControl {
@@ -387,6 +390,7 @@ fn a_cancelled_solve_stops_with_max_iterations_and_a_warning() {
     let resp = optimize_with(&req, &robot, &past).unwrap();
     if !mean_ok {
         assert_eq!(resp.status, Status::MaxIterations);
+        assert_eq!(resp.stop_reason, StopReason::Deadline);
         assert!(resp.report.warnings.iter().any(|w| w.contains("deadline")));
     }
 }
@@ -403,6 +407,14 @@ fn a_local_minimum_from_the_prior_mean_is_escaped_by_a_seeded_restart() {
     req.task.options.restarts = 0;
     let stuck = optimize(&req, &robot).unwrap();
     assert_eq!(stuck.status, Status::MaxIterations);
+    assert!(
+        matches!(
+            stuck.stop_reason,
+            StopReason::LocalMinimum | StopReason::IterationLimit
+        ),
+        "{:?}",
+        stuck.stop_reason
+    );
     req.task.options.restarts = 4;
     let found = optimize(&req, &robot).unwrap();
     assert_verified_optimal(&req, &robot, &found);
@@ -441,6 +453,7 @@ fn a_stalled_infeasible_run_raises_its_penalty_with_a_fresh_trust_region() {
 /// its report shows the clearance and the goal tolerance held.
 fn assert_verified_optimal(req: &OptimizeRequest, robot: &Robot, found: &OptimizeResponse) {
     assert_eq!(found.status, Status::Optimal);
+    assert_eq!(found.stop_reason, StopReason::Converged);
     let problem = req.validate(robot).unwrap();
     assert!(problem.is_feasible(&problem.evaluate(&found.weights)));
     let clearance = found.report.min_clearance_m.unwrap();

@@ -47,21 +47,34 @@ macro_rules! task_and_wire_request {
         pub struct Task { $( $(#[$fmeta:meta])* pub $field:ident : $ty:ty, )* }
     ) => {
         $(#[$meta])*
-        pub struct Task { $( $(#[$fmeta])* pub $field: $ty, )* }
+        pub struct Task {
+            /// Basis settings (`n_basis` must match the prior; default: the
+            /// paper's, or with the smooth prior
+            /// [`smooth_basis_config`](crate::promp::smooth::smooth_basis_config)).
+            #[serde(default)]
+            pub promp: PrompConfig,
+            $( $(#[$fmeta])* pub $field: $ty, )*
+        }
 
-        /// An [`OptimizeRequest`] as it is on the wire.
+        /// An [`OptimizeRequest`] as it is on the wire: without a `prior`
+        /// the smooth one, and without `promp` the basis that suits the
+        /// prior ([`PriorSpec::default_basis`]).
         #[derive(Deserialize)]
         #[serde(deny_unknown_fields)]
         struct WireRequest {
+            #[serde(default)]
             prior: PriorSpec,
+            #[serde(default)]
+            promp: Option<PrompConfig>,
             $( $(#[$fmeta])* $field: $ty, )*
         }
 
         impl From<WireRequest> for OptimizeRequest {
             fn from(w: WireRequest) -> Self {
+                let promp = w.promp.unwrap_or_else(|| w.prior.default_basis());
                 OptimizeRequest {
                     prior: w.prior,
-                    task: Task { $( $field: w.$field, )* },
+                    task: Task { promp, $( $field: w.$field, )* },
                 }
             }
         }
@@ -75,9 +88,6 @@ task_and_wire_request! {
     #[derive(Clone, Debug, Serialize, Deserialize)]
     #[serde(deny_unknown_fields)]
     pub struct Task {
-        /// Basis settings (`n_basis` must match the prior).
-        #[serde(default)]
-        pub promp: PrompConfig,
         /// Duration of the motion (s), for the velocity limits and timestamps.
         #[serde(default = "default_duration")]
         pub duration_s: f64,
@@ -182,11 +192,18 @@ fn default_duration() -> f64 {
 fn default_clearance() -> f64 {
     0.02
 }
-/// The prior: a full Gaussian or the paper's per-joint annotation (read
-/// by `prior`: exactly one form, lengths capped).
-#[derive(Clone, Debug, Serialize)]
+/// The prior: a full Gaussian, the paper's per-joint annotation (read
+/// by `prior`: exactly one form, lengths capped), or the smoothness prior
+/// (`"smooth"`, also what a request without a prior gets).
+#[derive(Clone, Debug, Default, Serialize)]
 #[serde(untagged)]
 pub enum PriorSpec {
+    /// `"smooth"`: the integrated squared acceleration, conditioned on the
+    /// start, the final configuration (when given) and the boundary
+    /// ([`crate::promp::smooth`]).
+    #[default]
+    #[serde(serialize_with = "serialize_smooth")]
+    Smooth,
     /// `{"mean": [...], "cov": [[...]]}`, joint-major.
     Full {
         /// Mean weights.
@@ -199,6 +216,25 @@ pub enum PriorSpec {
         /// One entry per joint.
         annotation: Vec<JointAnnotation>,
     },
+}
+
+/// The smooth prior's wire name.
+pub const SMOOTH_PRIOR: &str = "smooth";
+
+fn serialize_smooth<S: serde::Serializer>(serializer: S) -> Result<S::Ok, S::Error> {
+    serializer.serialize_str(SMOOTH_PRIOR)
+}
+
+impl PriorSpec {
+    /// The basis a request with this prior and no `promp` uses: the
+    /// paper's, or for the smooth prior one that can bend more
+    /// ([`crate::promp::smooth::smooth_basis_config`]).
+    pub fn default_basis(&self) -> PrompConfig {
+        match self {
+            PriorSpec::Smooth => crate::promp::smooth::smooth_basis_config(),
+            _ => PrompConfig::default(),
+        }
+    }
 }
 
 impl From<&crate::promp::WeightDistribution> for PriorSpec {

@@ -1,7 +1,8 @@
 //! Reading a [`PriorSpec`]: exactly one of its two forms, every length
 //! capped while it is read ([`crate::strict_json::AtMost`]).
 //!
-//! The prior is an object with either `mean` and `cov` or `annotation`;
+//! The prior is `"smooth"` or an object with either `mean` and `cov` or
+//! `annotation`;
 //! both forms at once, an unknown key or a missing half is refused with a
 //! message in the request's own terms. It is read straight into typed
 //! vectors (an untagged enum would first buffer the whole value, ~50 bytes
@@ -24,7 +25,7 @@ const KEYS: &[&str] = &["mean", "cov", "annotation"];
 
 impl<'de> Deserialize<'de> for PriorSpec {
     fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
-        deserializer.deserialize_map(PriorVisitor)
+        deserializer.deserialize_any(PriorVisitor)
     }
 }
 
@@ -34,7 +35,15 @@ impl<'de> Visitor<'de> for PriorVisitor {
     type Value = PriorSpec;
 
     fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str("a prior: an object with `mean` and `cov`, or with `annotation`")
+        f.write_str("a prior: \"smooth\", or an object with `mean` and `cov`, or with `annotation`")
+    }
+
+    fn visit_str<E: serde::de::Error>(self, value: &str) -> Result<PriorSpec, E> {
+        if value == super::SMOOTH_PRIOR {
+            Ok(PriorSpec::Smooth)
+        } else {
+            Err(E::invalid_value(serde::de::Unexpected::Str(value), &self))
+        }
     }
 
     fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<PriorSpec, A::Error> {

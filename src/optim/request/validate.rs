@@ -22,6 +22,7 @@ use crate::promp::{repair_covariance, Basis, PrompConfig, WeightDistribution};
 use crate::robot::Robot;
 use crate::scene::Scene;
 use crate::{Error, Result};
+use crate::promp::smooth::{EndConditions, SmoothnessPrior};
 use nalgebra::{DMatrix, DVector, Vector3};
 
 impl OptimizeRequest {
@@ -38,7 +39,7 @@ impl OptimizeRequest {
 pub(crate) fn validate_spec(prior: &PriorSpec, task: &Task, robot: &Robot) -> Result<Problem> {
     let n_basis = task.promp.n_basis;
     task.problem(robot, None, |warnings| {
-        prior_distribution(prior, robot.dof(), n_basis, warnings)
+        prior_distribution(prior, task, robot.dof(), n_basis, warnings)
     })
 }
 
@@ -58,6 +59,15 @@ impl Task {
         self.problem(robot, Some(basis), |warnings| {
             typed_prior(prior, robot.dof(), self.promp.n_basis, warnings)
         })
+    }
+
+    /// How the phase advances with time: ramps to rest at both ends for
+    /// `boundary: rest`, uniformly for `free`.
+    pub fn time_warp(&self) -> TimeWarp {
+        match self.boundary {
+            Boundary::Rest => TimeWarp::Ramped,
+            Boundary::Free => TimeWarp::Identity,
+        }
     }
 
     /// The basis of the task's `promp` (errors name `promp`).
@@ -89,10 +99,7 @@ impl Task {
             Some(b) if b.config() == &self.promp => b.clone(),
             _ => Basis::new(&self.promp)?,
         };
-        let warp = match self.boundary {
-            Boundary::Rest => TimeWarp::Ramped,
-            Boundary::Free => TimeWarp::Identity,
-        };
+        let warp = self.time_warp();
         let timing = (self.duration_s, warp);
         let grid = PhaseRows::new(&basis, &whitening, robot.dof(), timing, basis.phases());
         let end_phases: Vec<f64> = [0.0, 1.0]
@@ -517,11 +524,13 @@ pub fn check_prior(prior: &WeightDistribution, dof: usize, n_basis: usize) -> Re
 /// The prior as a (repaired) weight distribution over `dof x n_basis` weights.
 fn prior_distribution(
     spec: &PriorSpec,
+    task: &Task,
     dof: usize,
     n_basis: usize,
     warnings: &mut Vec<String>,
 ) -> Result<WeightDistribution> {
     match spec {
+        PriorSpec::Smooth => smooth_prior(task, dof),
         PriorSpec::Full { mean, cov } => {
             full_prior(mean, cov, dof, n_basis, warnings).map_err(|e| e.within("prior"))
         }
@@ -538,6 +547,32 @@ fn prior_distribution(
             Ok(prior.distribution)
         }
     }
+}
+
+/// The smoothness prior on the task's basis, conditioned on its start, its
+/// final configuration (when given) and its boundary.
+fn smooth_prior(task: &Task, dof: usize) -> Result<WeightDistribution> {
+    let Some(start) = task.start.as_deref() else {
+        return Err(Error::invalid(
+            "start",
+            "required with the smooth prior (a request without `prior`): the prior is the smoothest motion from the start",
+        ));
+    };
+    if start.len() != dof {
+        return Err(Error::invalid(
+            "start",
+            format!("expected {dof} joint values, got {}", start.len()),
+        ));
+    }
+    let warp = task.time_warp();
+    let prior = SmoothnessPrior::new(&task.promp, &|tau| warp.at(tau)).map_err(|e| match e {
+        Error::Invalid { .. } => e,
+        other => other.within("promp"),
+    })?;
+    prior.conditioned(&EndConditions {
+        start,
+        end: task.options.final_configuration.as_deref(),
+    })
 }
 
 fn full_prior(

@@ -31,10 +31,11 @@
 use crate::optim::problem::phases::PhaseRows;
 use crate::optim::problem::Problem;
 use crate::optim::qp::{ClarabelInfo, QpFailure, QpSolution};
-use crate::optim::report::{FinalQp, Status};
+use crate::optim::report::FinalQp;
 use crate::optim::scp::evaluate::GridEval;
 use crate::optim::scp::subproblem::{ActiveRows, Linearisation};
 use crate::optim::solution::{timed, Solution, SolveControl, SolveStats};
+use crate::optim::stop_reason::{Interruption, StopReason};
 use crate::optim::tolerances::{
     BALL_ACTIVE_FRACTION, MAX_PENALTY, MAX_TRUST_REGION, MIN_TRUST_REGION, OPTIMALITY_TOLERANCE,
 };
@@ -191,11 +192,11 @@ impl<'a> Scp<'a> {
             p.verify(&self.eval.w, ctl)
         });
         if let Some(why) = v.interrupted {
-            return Some(self.stopped_early(format!("solver stopped early: {why}"), Some(v)));
+            return Some(self.stopped_early(why, Some(v)));
         }
         if v.flagged.is_empty() && p.is_feasible(&v.report) {
             self.stats.final_penalty = self.rho;
-            let mut sol = self.answer(Status::Optimal, Some(v), None, &[]);
+            let mut sol = self.answer(StopReason::Converged, Some(v), None, &[]);
             sol.report.final_qp = Some(final_qp);
             return Some(sol);
         }
@@ -203,7 +204,12 @@ impl<'a> Scp<'a> {
         self.stats.added_phases += added;
         if added == 0 {
             let reason = "dense verification failed on a constraint the optimiser cannot refine (goal or equality)";
-            return Some(self.answer(Status::MaxIterations, Some(v), Some(reason.into()), &[]));
+            return Some(self.answer(
+                StopReason::VerificationFailed,
+                Some(v),
+                Some(reason.into()),
+                &[],
+            ));
         }
         let z = self.eval.z.clone();
         self.eval = timed(&mut self.stats.evaluation_ms, || {
@@ -217,7 +223,7 @@ impl<'a> Scp<'a> {
     /// Step 2: the caller's deadline / cancel flag and the iteration limit.
     fn out_of_budget(&mut self) -> Flow {
         if let Some(why) = self.ctl.stop_reason() {
-            return Some(self.stopped_early(format!("solver stopped early: {why}"), None));
+            return Some(self.stopped_early(why, None));
         }
         if self.stats.iterations >= self.max_iterations {
             let reason = format!(
@@ -225,7 +231,7 @@ impl<'a> Scp<'a> {
                 self.max_iterations,
                 self.problem.worst_constraint(&self.eval)
             );
-            return Some(self.answer(Status::MaxIterations, None, Some(reason), &[]));
+            return Some(self.answer(StopReason::IterationLimit, None, Some(reason), &[]));
         }
         None
     }
@@ -244,19 +250,19 @@ impl<'a> Scp<'a> {
             Err(QpFailure::Infeasible) => {
                 let reason = "joint position limits (minus the margin), velocity limits and the start / final configuration cannot all hold".to_string();
                 Err(Box::new(self.answer(
-                    Status::Infeasible,
+                    StopReason::LimitsIncompatible,
                     None,
                     Some(reason),
                     &[],
                 )))
             }
-            Err(QpFailure::OutOfTime) => Err(Box::new(
-                self.stopped_early("solver stopped early: deadline reached".into(), None),
-            )),
+            Err(QpFailure::OutOfTime) => {
+                Err(Box::new(self.stopped_early(Interruption::Deadline, None)))
+            }
             Err(QpFailure::Numerical(what)) => {
                 let reason = format!("QP solver failed ({what}); best iterate returned");
                 Err(Box::new(self.answer(
-                    Status::MaxIterations,
+                    StopReason::QpNumericalFailure,
                     None,
                     Some(reason),
                     &[],
@@ -442,7 +448,7 @@ impl<'a> Scp<'a> {
             "no feasible solution found: {} could not be reduced further at the largest penalty (a local minimum of the violation; the problem may be infeasible)",
             self.problem.worst_constraint(&self.eval)
         );
-        Some(self.answer(Status::MaxIterations, None, Some(reason), &[]))
+        Some(self.answer(StopReason::LocalMinimum, None, Some(reason), &[]))
     }
 
     /// Finish as `max_iterations` because the caller stopped the solver;
@@ -450,21 +456,22 @@ impl<'a> Scp<'a> {
     /// A dense verification interrupted by the stop is its report; without
     /// one, the answer's verification stops at once too, so a stopped run
     /// costs only the matrix products of the limit figures.
-    fn stopped_early(&mut self, warn: String, verification: Option<Verification>) -> Solution {
+    fn stopped_early(&mut self, why: Interruption, verification: Option<Verification>) -> Solution {
+        let warn = format!("solver stopped early: {why}");
         let warnings = [warn.clone()];
-        self.answer(Status::MaxIterations, verification, Some(warn), &warnings)
+        self.answer(why.stop_reason(), verification, Some(warn), &warnings)
     }
 
     /// The run's answer at the current iterate.
     fn answer(
         &mut self,
-        status: Status,
+        stop: StopReason,
         verification: Option<crate::optim::verify::Verification>,
         reason: Option<String>,
         extra_warnings: &[String],
     ) -> Solution {
         self.problem.finish(
-            status,
+            stop,
             &self.eval,
             verification,
             reason,
@@ -591,7 +598,7 @@ impl Problem {
     #[allow(clippy::too_many_arguments)]
     fn finish(
         &self,
-        status: Status,
+        stop: StopReason,
         eval: &GridEval,
         verification: Option<Verification>,
         reason: Option<String>,
@@ -613,7 +620,8 @@ impl Problem {
         }
         report.solve_ms = started.elapsed().as_secs_f64() * 1e3;
         Solution {
-            status,
+            status: stop.status(),
+            stop_reason: stop,
             weights: eval.w.as_slice().to_vec(),
             mahalanobis: self.whitening.mahalanobis(&eval.w),
             report,

@@ -106,7 +106,12 @@ impl Problem {
                 }
                 Ok(spent.onto(sol, note))
             }
-            (None, Some(why)) => Ok(spent.onto(first, format!("restarts stopped: {why}"))),
+            (None, Some(why)) => {
+                let mut first = first;
+                first.stop_reason = why.stop_reason();
+                first.status = first.stop_reason.status();
+                Ok(spent.onto(first, format!("restarts stopped: {why}")))
+            }
             (None, None) => {
                 let note = format!(
                     "{restarts} restarts (detours around the blocking obstacles, then seeded prior draws) found no feasible solution either"

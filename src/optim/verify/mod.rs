@@ -33,7 +33,7 @@ pub struct Verification {
     /// Why the clearance part was not finished (the caller's deadline or
     /// cancel flag): the report then has no clearance figures, a warning
     /// says so, and it is never feasible.
-    pub interrupted: Option<&'static str>,
+    pub interrupted: Option<crate::optim::stop_reason::Interruption>,
 }
 
 impl Problem {

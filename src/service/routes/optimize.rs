@@ -3,9 +3,7 @@
 //! service's limits and the solve all run as one job on the blocking pool
 //! under the concurrency limit and the deadline counted from arrival.
 
-use crate::optim::{
-    optimize_with, OptimizeRequest, OptimizeResponse, Sharing, SolveControl, Status, Task,
-};
+use crate::optim::{optimize_with, OptimizeRequest, OptimizeResponse, Sharing, SolveControl, Task};
 use crate::service::config::ServiceConfig;
 use crate::service::error::ApiError;
 use crate::service::extract::{
@@ -78,19 +76,10 @@ pub fn check_request_limits(config: &ServiceConfig, task: &Task) -> Result<(), A
     Ok(())
 }
 
-/// The JSON name of a status (`optimal`, `infeasible`, `max_iterations`).
-pub fn status_name(status: Status) -> &'static str {
-    match status {
-        Status::Optimal => "optimal",
-        Status::Infeasible => "infeasible",
-        Status::MaxIterations => "max_iterations",
-    }
-}
-
 /// Count a finished solve in the metrics.
 pub fn record_solve(state: &AppState, response: &OptimizeResponse) {
     state.metrics().record_solve(
-        status_name(response.status),
+        response.status.as_str(),
         response.report.iterations,
         response.report.solve_ms / 1e3,
     );
