@@ -17,6 +17,7 @@ pub mod data;
 pub mod eval;
 pub mod optimize;
 pub mod plan;
+pub mod plan_moveit;
 pub mod prior;
 pub mod promp_args;
 pub mod robot;
@@ -58,6 +59,8 @@ pub enum Command {
     Eval(eval::EvalArgs),
     /// Plan from an image: network prior, then the optimiser.
     Plan(plan::PlanArgs),
+    /// Plan a MoveIt query: a PlanningScene and a MotionPlanRequest.
+    PlanMoveit(plan_moveit::PlanMoveItArgs),
     /// Run the HTTP service.
     Serve(serve::ServeArgs),
     /// The planner as a ROS 2 node, and a stand-in cell to drive one
@@ -106,6 +109,7 @@ pub fn run(command: Command) -> crate::Result<()> {
         Command::Train(a) => train::run(a),
         Command::Eval(a) => eval::run(a),
         Command::Plan(a) => plan::run(a),
+        Command::PlanMoveit(a) => plan_moveit::run(a),
         Command::Serve(a) => serve::run(a),
         Command::Ros2(c) => ros2::run(c),
         Command::Bench(a) => bench::run(a),

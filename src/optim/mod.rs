@@ -41,6 +41,7 @@
 //! Determinism: the same request gives the same response bytes except for
 //! the wall-clock `solve_ms` fields.
 
+pub mod auto_duration;
 pub mod infeasible;
 pub mod problem;
 pub mod qp;
@@ -54,6 +55,7 @@ pub mod task;
 pub mod tolerances;
 pub mod verify;
 
+pub use auto_duration::optimize_auto_duration;
 pub use problem::Problem;
 pub use report::{
     Closest, JointTrajectory, OptimizeResponse, SampleResult, Status, TrajectoryPoint,
@@ -119,9 +121,11 @@ fn respond(
     let mut warnings = problem.warnings().to_vec();
     warnings.append(&mut prior_mean_report.warnings);
     prior_mean_report.warnings = warnings;
-    let mut response = if let Some(reason) = problem.diagnose() {
-        let proof = (StopReason::ProvenInfeasible, reason);
-        infeasible_at_prior_mean(&problem, mean, prior_mean_report, proof)
+    let mut response = if let Some(found) = problem.diagnosis() {
+        let proof = (StopReason::ProvenInfeasible, found.reason);
+        let mut r = infeasible_at_prior_mean(&problem, mean, prior_mean_report, proof);
+        r.culprit = Some(found.culprit);
+        r
     } else if let Some(proof) = problem.duration_proof() {
         let why = (StopReason::DurationTooShort, proof.reason);
         let mut r = infeasible_at_prior_mean(&problem, mean, prior_mean_report, why);
@@ -138,6 +142,7 @@ fn respond(
         OptimizeResponse {
             status: solution.status,
             stop_reason: solution.stop_reason,
+            duration_s: task.duration_s,
             trajectory: problem.trajectory(&solution.weights),
             mahalanobis: solution.mahalanobis,
             weights: solution.weights,
@@ -147,6 +152,7 @@ fn respond(
             reason: solution.reason,
             min_duration_s: None,
             duration_lower_bound_s: None,
+            culprit: None,
         }
     };
     response.report.solve_ms = started.elapsed().as_secs_f64() * 1e3;
@@ -164,6 +170,7 @@ fn infeasible_at_prior_mean(
     OptimizeResponse {
         status: stop_reason.status(),
         stop_reason,
+        duration_s: problem.duration(),
         mahalanobis: 0.0,
         trajectory: problem.trajectory(&mean),
         report: prior_mean_report.clone(),
@@ -173,6 +180,7 @@ fn infeasible_at_prior_mean(
         reason: Some(reason),
         min_duration_s: None,
         duration_lower_bound_s: None,
+        culprit: None,
     }
 }
 

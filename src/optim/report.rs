@@ -336,6 +336,9 @@ pub struct OptimizeResponse {
     /// Why the solve ended where it did (`status` is
     /// `stop_reason.status()`).
     pub stop_reason: super::StopReason,
+    /// The motion's duration (s): the request's `duration_s`, or the one
+    /// `duration: auto` chose.
+    pub duration_s: f64,
     /// Optimised weights, joint-major (the prior mean when infeasible
     /// before solving).
     pub weights: Vec<f64>,
@@ -366,6 +369,11 @@ pub struct OptimizeResponse {
     /// ([`super::infeasible::duration`]); durations above it may still be infeasible.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub duration_lower_bound_s: Option<f64>,
+    /// With `stop_reason: proven_infeasible`: which part of the request the
+    /// diagnosis found impossible (not serialised: `reason` says it in
+    /// words; MoveIt's error codes map it).
+    #[serde(skip)]
+    pub culprit: Option<super::infeasible::diagnose::Culprit>,
 }
 
 impl OptimizeResponse {

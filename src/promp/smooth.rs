@@ -334,7 +334,11 @@ mod tests {
             simpson.ger(wt / (3.0 * n as f64), &a, &a, 1.0);
         }
         let gram = prior.acceleration_gram();
-        assert!((gram - &simpson).amax() < 1e-7 * gram.amax(), "{}", (gram - &simpson).amax());
+        assert!(
+            (gram - &simpson).amax() < 1e-7 * gram.amax(),
+            "{}",
+            (gram - &simpson).amax()
+        );
         let ones = vec![1.0; nb];
         assert!(prior.phase_acceleration_cost(&ones) < 1e-9 * gram.amax());
     }
@@ -356,7 +360,8 @@ mod tests {
         for warp in [&identity as Warp, &rest] {
             let prior = SmoothnessPrior::new(&c, warp).unwrap();
             let null = prior.null_space(&prior.condition_rows(true)).unwrap();
-            let eig = (null.transpose() * prior.acceleration_gram() * &null).symmetric_eigenvalues();
+            let eig =
+                (null.transpose() * prior.acceleration_gram() * &null).symmetric_eigenvalues();
             assert!(eig.max() / eig.min() < 1e3, "{eig}");
         }
     }

@@ -183,6 +183,27 @@ fn path_error(e: serde_path_to_error::Error<serde_json::Error>, bytes: &[u8]) ->
     }
 }
 
+/// The members of a JSON object body, each kept as its raw JSON text and
+/// parsed on its own into its type: no value tree is built, so a body's
+/// memory is its size plus what its typed fields hold.
+pub type Fields = std::collections::BTreeMap<String, Box<serde_json::value::RawValue>>;
+
+/// The members as one JSON object's text (what remains once the route has
+/// taken its own).
+pub fn object_text(fields: &Fields) -> String {
+    let mut text = String::from("{");
+    for (i, (key, value)) in fields.iter().enumerate() {
+        if i > 0 {
+            text.push(',');
+        }
+        text.push_str(&serde_json::Value::from(key.as_str()).to_string());
+        text.push(':');
+        text.push_str(value.get());
+    }
+    text.push('}');
+    text
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

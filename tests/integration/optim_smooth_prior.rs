@@ -56,8 +56,14 @@ fn with_no_obstacles_the_answer_is_the_closed_form_smoothest_motion() {
     let nb = config.n_basis;
     let pairs = [
         ([0.5; 7], [0.5, 0.6, 0.4, 0.55, 0.5, 0.45, 0.6]),
-        ([0.3, 0.4, 0.5, 0.6, 0.5, 0.4, 0.3], [0.6, 0.5, 0.4, 0.5, 0.6, 0.5, 0.4]),
-        ([0.45, 0.35, 0.5, 0.7, 0.5, 0.5, 0.5], [0.55, 0.6, 0.45, 0.5, 0.4, 0.6, 0.3]),
+        (
+            [0.3, 0.4, 0.5, 0.6, 0.5, 0.4, 0.3],
+            [0.6, 0.5, 0.4, 0.5, 0.6, 0.5, 0.4],
+        ),
+        (
+            [0.45, 0.35, 0.5, 0.7, 0.5, 0.5, 0.5],
+            [0.55, 0.6, 0.45, 0.5, 0.4, 0.6, 0.3],
+        ),
     ];
     for boundary in ["rest", "free"] {
         for (from, to) in &pairs {
@@ -131,7 +137,9 @@ fn its_mahalanobis_distance_is_the_integrated_squared_acceleration() {
     let mid = problem.trajectory(&mean).points[75].positions.clone();
     let tcp = robot.tcp_pose(&mid).translation.vector;
     let mut req = free.clone();
-    req.task.obstacles.push(sphere("in the way", [tcp.x, tcp.y, tcp.z], 0.03));
+    req.task
+        .obstacles
+        .push(sphere("in the way", [tcp.x, tcp.y, tcp.z], 0.03));
     let answer = optimize(&req, &robot).unwrap();
     assert_eq!(answer.status, Status::Optimal, "{:?}", answer.reason);
     assert!(answer.mahalanobis > 0.05, "{}", answer.mahalanobis);
@@ -160,7 +168,10 @@ fn a_smooth_prior_needs_a_start_and_names_a_bad_prior() {
     assert!(err.contains("start"), "{err}");
     let bad = serde_json::from_value::<OptimizeRequest>(json!({"prior": "smoothest"}));
     let err = bad.err().unwrap().to_string();
-    assert!(err.contains("smoothest") && err.contains("\"smooth\""), "{err}");
+    assert!(
+        err.contains("smoothest") && err.contains("\"smooth\""),
+        "{err}"
+    );
     // A request that names the paper's basis keeps it; too few functions
     // for the end conditions are refused naming `promp.n_basis`.
     let start = robot.home();

@@ -6,30 +6,70 @@ use crate::optim::tolerances::FEASIBILITY_TOLERANCE;
 use crate::robot::{IkOptions, IkTarget};
 use nalgebra::Point3;
 
+/// What a [`Problem::diagnosis`] found: which part of the request no
+/// trajectory can meet (for callers that map it, e.g. MoveIt's error
+/// codes).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Culprit {
+    /// `start` is outside the joint limits.
+    StartOutsideLimits,
+    /// `start` is closer to an obstacle than `clearance_m`.
+    StartInCollision,
+    /// `options.final_configuration` is outside the joint limits.
+    GoalOutsideLimits,
+    /// The goal (`options.final_configuration`, or `goal.position` buried
+    /// deep in an obstacle) is closer to an obstacle than `clearance_m`.
+    GoalInCollision,
+    /// `goal.position` is out of reach, or inverse kinematics to it fails.
+    GoalUnreachable,
+    /// A configuration via point is outside the joint limits.
+    ViaPointOutsideLimits,
+}
+
+/// A proof before any solve that the problem is infeasible.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Diagnosis {
+    /// What cannot be met.
+    pub culprit: Culprit,
+    /// Why, in words naming the request field.
+    pub reason: String,
+}
+
 impl Problem {
-    /// Why the problem is infeasible before any solve, if it evidently is:
-    /// start (or final configuration) outside the limits, start in
-    /// collision, goal buried deep in an obstacle, goal beyond the
-    /// arm's reach, or inverse kinematics to the goal failing from several
-    /// seeds.
+    /// Why the problem is infeasible before any solve, if it evidently is
+    /// (the words of [`Problem::diagnosis`]).
     pub fn diagnose(&self) -> Option<String> {
+        self.diagnosis().map(|d| d.reason)
+    }
+
+    /// What makes the problem infeasible before any solve, if anything
+    /// evidently does: start (or final configuration, or a via point)
+    /// outside the limits, start or final configuration in collision, goal
+    /// buried deep in an obstacle, goal beyond the arm's reach, or inverse
+    /// kinematics to the goal failing from several seeds.
+    pub fn diagnosis(&self) -> Option<Diagnosis> {
+        let found = |culprit| move |reason| Diagnosis { culprit, reason };
         if let Some(start) = &self.linear.start {
             if let Some(r) = self.outside_limits("start", start) {
-                return Some(r);
+                return Some(found(Culprit::StartOutsideLimits)(r));
             }
-            if let Some(r) = self.start_collision(start) {
-                return Some(r);
+            if let Some(r) = self.in_collision("start", start) {
+                return Some(found(Culprit::StartInCollision)(r));
             }
         }
         if let Some(q) = &self.linear.final_configuration {
-            if let Some(r) = self.outside_limits("options.final_configuration", q) {
-                return Some(r);
+            let field = "options.final_configuration";
+            if let Some(r) = self.outside_limits(field, q) {
+                return Some(found(Culprit::GoalOutsideLimits)(r));
+            }
+            if let Some(r) = self.in_collision(field, q) {
+                return Some(found(Culprit::GoalInCollision)(r));
             }
         }
         for (p, q) in &self.linear.via {
             let field = format!("via_points[{}].configuration", p - 2);
             if let Some(r) = self.outside_limits(&field, q) {
-                return Some(r);
+                return Some(found(Culprit::ViaPointOutsideLimits)(r));
             }
         }
         self.goal_problem()
@@ -50,32 +90,42 @@ impl Problem {
         })
     }
 
-    fn start_collision(&self, start: &[f64]) -> Option<String> {
-        let frames = self.robot.fk(start);
+    /// Why configuration `q` (the request's `field`) is closer to an
+    /// obstacle than `clearance_m`, if it is.
+    fn in_collision(&self, field: &str, q: &[f64]) -> Option<String> {
+        let frames = self.robot.fk(q);
         let c = self.scene.min_clearance(&self.robot, &frames)?;
         (c.distance < self.clearance_m - FEASIBILITY_TOLERANCE).then(|| {
             format!(
-                "start is in collision: {} (clearance_m {:.4})",
+                "{field} is in collision: {} (clearance_m {:.4})",
                 c.describe(&self.robot, &self.scene),
                 self.clearance_m
             )
         })
     }
 
-    fn goal_problem(&self) -> Option<String> {
+    fn goal_problem(&self) -> Option<Diagnosis> {
         let goal = self.goal.as_ref()?;
         let p = Point3::from(goal.position);
         if let Some(reason) = self.goal_buried(&p, goal.tolerance_m) {
-            return Some(reason);
+            return Some(Diagnosis {
+                culprit: Culprit::GoalInCollision,
+                reason,
+            });
         }
         let bound = self.robot.reach();
         let (distance, reach) = (bound.distance(&goal.position), bound.radius);
-        if !bound.holds(&goal.position, goal.tolerance_m) {
-            return Some(format!(
+        let unreachable = if !bound.holds(&goal.position, goal.tolerance_m) {
+            Some(format!(
                 "goal: out of reach, {distance:.3} m from the shoulder, the arm reaches at most {reach:.3} m"
-            ));
-        }
-        self.ik_failure(&p, goal.tolerance_m)
+            ))
+        } else {
+            self.ik_failure(&p, goal.tolerance_m)
+        };
+        unreachable.map(|reason| Diagnosis {
+            culprit: Culprit::GoalUnreachable,
+            reason,
+        })
     }
 
     /// The goal is buried in an obstacle when no TCP position within the

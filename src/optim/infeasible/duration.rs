@@ -155,7 +155,7 @@ impl Problem {
         if self.duration_allows(&rates, &demand, self.duration) {
             return None;
         }
-        let lower_bound_s = self.shortest_allowed(&rates, &demand);
+        let lower_bound_s = self.shortest_allowed(&rates, &demand, self.duration);
         let what = match &demand {
             Demand::TcpTravel(d) => format!(
                 "the TCP must travel at least {d:.3} m from the start to within goal.tolerance_m of goal.position"
@@ -212,13 +212,23 @@ impl Problem {
         }
     }
 
-    /// The smallest duration the bound allows for `demand` (bisection; the
-    /// bound is monotone in the duration), rounded down to the millisecond.
-    fn shortest_allowed(&self, rates: &[JointRates], demand: &Demand) -> Option<f64> {
+    /// The shortest duration (s, rounded down to the millisecond) the
+    /// closed-form bound allows for the motion the request demands,
+    /// whatever its `duration_s`; `None` without a start, when nothing
+    /// must move, or when not even [`MAX_DURATION_S`] is enough.
+    pub fn duration_lower_bound(&self) -> Option<f64> {
+        let demand = self.demand()?;
+        self.shortest_allowed(&self.joint_rates(), &demand, 0.0)
+    }
+
+    /// The smallest duration above `from` that the bound allows for
+    /// `demand` (bisection; the bound is monotone in the duration),
+    /// rounded down to the millisecond.
+    fn shortest_allowed(&self, rates: &[JointRates], demand: &Demand, from: f64) -> Option<f64> {
         if !self.duration_allows(rates, demand, MAX_DURATION_S) {
             return None;
         }
-        let (mut lo, mut hi) = (self.duration, MAX_DURATION_S);
+        let (mut lo, mut hi) = (from, MAX_DURATION_S);
         while hi - lo > BISECTION_TOLERANCE * hi {
             let mid = 0.5 * (lo + hi);
             if self.duration_allows(rates, demand, mid) {

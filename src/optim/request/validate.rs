@@ -18,11 +18,11 @@ use crate::optim::task::{
 };
 use crate::promp::annotation::{prior_from_joints, REPAIR_FLOOR_RELATIVE};
 use crate::promp::basis::phase_grid;
+use crate::promp::smooth::{EndConditions, SmoothnessPrior};
 use crate::promp::{repair_covariance, Basis, PrompConfig, WeightDistribution};
 use crate::robot::Robot;
 use crate::scene::Scene;
 use crate::{Error, Result};
-use crate::promp::smooth::{EndConditions, SmoothnessPrior};
 use nalgebra::{DMatrix, DVector, Vector3};
 
 impl OptimizeRequest {

@@ -9,6 +9,7 @@ use axum::routing::{get, post, MethodRouter};
 pub mod health;
 pub mod metrics;
 pub mod models;
+pub mod moveit;
 pub mod optimize;
 pub mod plan;
 pub mod robot;
@@ -42,6 +43,10 @@ pub fn table() -> Vec<(RouteSpec, MethodRouter<AppState>)> {
             post(optimize::optimize),
         ),
         (spec(Method::POST, "/v1/plan", true), post(plan::plan)),
+        (
+            spec(Method::POST, "/v1/moveit/plan", true),
+            post(moveit::plan),
+        ),
         (spec(Method::GET, "/v1/robot", true), get(robot::robot)),
         (spec(Method::GET, "/v1/models", true), get(models::models)),
         (spec(Method::GET, "/healthz", false), get(health::healthz)),

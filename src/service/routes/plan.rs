@@ -31,7 +31,8 @@ use crate::plan::{
 use crate::service::config::ServiceConfig;
 use crate::service::error::ApiError;
 use crate::service::extract::{
-    media_type, parse_json_until, parse_member, parse_typed, read_body, within_body_time, MediaType,
+    media_type, object_text, parse_json_until, parse_member, parse_typed, read_body,
+    within_body_time, Fields, MediaType,
 };
 use crate::service::image::{
     decode_base64, decode_image_within, read_header, DecodeBudget, Reservation,
@@ -60,11 +61,6 @@ const TARGET_FIELD: &str = "target_position";
 const STANDOFF_FIELD: &str = "goal_standoff_m";
 const CAMERA_FIELD: &str = "camera";
 const WORLD_FIELD: &str = "world";
-
-/// The members of a plan body, each kept as its raw JSON text and parsed
-/// on its own into its type: no value tree is built, so a body's memory is
-/// its size plus what its typed fields hold.
-type Fields = BTreeMap<String, Box<RawValue>>;
 
 /// A request as received, nothing parsed or decoded yet: that is CPU work
 /// and runs in the request's job.
@@ -367,21 +363,6 @@ fn goal_approach(fields: &mut Fields) -> Result<Option<GoalApproach>, ApiError> 
         .remove("goal")
         .ok_or_else(|| ApiError::invalid("goal", "missing"))?;
     parse_member("goal", &raw).map(Some)
-}
-
-/// The members as one JSON object's text (what remains for the optimiser).
-fn object_text(fields: &Fields) -> String {
-    let mut text = String::from("{");
-    for (i, (key, value)) in fields.iter().enumerate() {
-        if i > 0 {
-            text.push(',');
-        }
-        text.push_str(&serde_json::Value::from(key.as_str()).to_string());
-        text.push(':');
-        text.push_str(value.get());
-    }
-    text.push('}');
-    text
 }
 
 /// A 16-bit depth PNG of the image's size: the size checked from its header
