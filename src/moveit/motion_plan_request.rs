@@ -138,7 +138,7 @@ impl MotionPlanRequest {
             ));
         }
         let goal = match self.goal_constraints.first() {
-            Some(c) => c.goal(robot)?,
+            Some(c) => c.goal(robot, &self.start_state.joint_state.name, &mut warnings)?,
             None => {
                 return Err(Error::invalid(
                     "goal_constraints",
@@ -230,9 +230,36 @@ fn configuration_by_name(
 }
 
 impl Constraints {
-    fn goal(&self, robot: &Robot) -> Result<MoveItGoal> {
+    /// The goal of these constraints; a joint constraint on a joint of the
+    /// robot's state (`state_joints`) outside the planned chain is reported
+    /// in `warnings`, one on a joint neither knows is refused.
+    fn goal(
+        &self,
+        robot: &Robot,
+        state_joints: &[String],
+        warnings: &mut Vec<String>,
+    ) -> Result<MoveItGoal> {
         const FIELD: &str = "goal_constraints[0]";
         if !self.joint_constraints.is_empty() {
+            for (k, c) in self.joint_constraints.iter().enumerate() {
+                if robot.joint_names().contains(&c.joint_name) {
+                    continue;
+                }
+                if !state_joints.contains(&c.joint_name) {
+                    return Err(Error::invalid(
+                        format!("{FIELD}.joint_constraints[{k}].joint_name"),
+                        format!(
+                            "INVALID_GOAL_CONSTRAINTS: no joint {:?} in the robot ({}) or its start state",
+                            c.joint_name,
+                            robot.joint_names().join(", ")
+                        ),
+                    ));
+                }
+                warnings.push(format!(
+                    "goal joint {:?} is not in the planned chain: not used",
+                    c.joint_name
+                ));
+            }
             let mut q = Vec::with_capacity(robot.dof());
             for (j, joint) in robot.joint_names().iter().enumerate() {
                 let Some((k, c)) = self

@@ -37,6 +37,7 @@ mod optim_requests;
 mod optim_smooth_prior;
 mod optim_task;
 mod plan_interfaces;
+mod plan_moveit;
 mod plan_world;
 mod python_client;
 mod robot_cli;

@@ -1,0 +1,291 @@
+//! MoveIt queries planned: `dpmp plan-moveit` and `POST /v1/moveit/plan`
+//! give the same answer, the error codes follow what the diagnosis and the
+//! solver found, bad input is refused naming the field, and `duration:
+//! auto` picks the shortest duration (within 10 %) that keeps the rate
+//! limits.
+
+use crate::common::cli::{arg, dpmp, stderr};
+use crate::common::http::{
+    assert_valid, client, code, field, openapi, post_json, start, test_config, without_timing,
+};
+use crate::common::robot::panda;
+use dpmp::moveit::{plan_moveit, MoveItPlanOptions, MoveItQuery};
+use dpmp::optim::auto_duration::{time_scale_to_limits, AUTO_DURATION_STEP};
+use dpmp::optim::SolveControl;
+use serde_json::{json, Value};
+
+const READY: [f64; 7] = [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785];
+const GOAL: [f64; 7] = [0.5, -0.3, 0.2, -2.0, 0.1, 1.8, 0.6];
+
+/// A table under the arm and a ball beside it, with `extra` objects.
+fn scene(extra: &[Value]) -> Value {
+    let mut objects = vec![
+        json!({
+            "id": "table", "header": {"frame_id": "panda_link0"}, "operation": 0,
+            "primitives": [{"type": 1, "dimensions": [1.0, 1.2, 0.02]}],
+            "primitive_poses": [{"position": {"x": 0.5, "y": 0.0, "z": -0.05},
+                                 "orientation": {"x": 0, "y": 0, "z": 0, "w": 1}}]
+        }),
+        json!({
+            "id": "ball", "header": {"frame_id": "panda_link0"}, "operation": 0,
+            "primitives": [{"type": 2, "dimensions": [0.05]}],
+            "primitive_poses": [{"position": {"x": -0.3, "y": 0.6, "z": 0.9},
+                                 "orientation": {"x": 0, "y": 0, "z": 0, "w": 1}}]
+        }),
+    ];
+    objects.extend(extra.iter().cloned());
+    json!({"name": "test", "is_diff": false, "world": {"collision_objects": objects}})
+}
+
+/// A request from `start` to the joint goal `goal` (MoveIt's nine joints:
+/// the fingers are in the start state).
+fn request(start: &[f64], goal: &[f64], planning_time: f64) -> Value {
+    let names: Vec<String> = (1..=7).map(|k| format!("panda_joint{k}")).collect();
+    let mut state_names = names.clone();
+    state_names.extend(["panda_finger_joint1".into(), "panda_finger_joint2".into()]);
+    let mut positions = start.to_vec();
+    positions.extend([0.035, 0.035]);
+    let constraints: Vec<Value> = names
+        .iter()
+        .zip(goal)
+        .map(|(n, q)| json!({"joint_name": n, "position": q, "tolerance_above": 0.001, "tolerance_below": 0.001, "weight": 1.0}))
+        .collect();
+    json!({
+        "group_name": "panda_arm",
+        "start_state": {"joint_state": {"name": state_names, "position": positions}},
+        "goal_constraints": [{"joint_constraints": constraints}],
+        "max_velocity_scaling_factor": 0.0,
+        "max_acceleration_scaling_factor": 0.0,
+        "allowed_planning_time": planning_time,
+    })
+}
+
+fn body(scene: &Value, request: &Value) -> String {
+    json!({"planning_scene": scene, "motion_plan_request": request}).to_string()
+}
+
+/// The answer without its wall-clock fields.
+fn deterministic(mut answer: Value) -> Value {
+    answer["moveit"]["planning_time"] = json!(0);
+    without_timing(answer)
+}
+
+/// A sphere of `radius` on the TCP of `q`.
+fn ball_on_tcp(id: &str, q: &[f64], radius: f64) -> Value {
+    let p = panda().tcp_pose(q).translation.vector;
+    json!({
+        "id": id, "header": {"frame_id": "panda_link0"},
+        "primitives": [{"type": "sphere", "dimensions": [radius]}],
+        "primitive_poses": [{"position": [p.x, p.y, p.z]}]
+    })
+}
+
+#[test]
+fn the_cli_and_the_service_give_the_same_answer_from_yaml_and_json() {
+    let blocked = scene(&[ball_on_tcp("on start", &READY, 0.04)]);
+    let (scene, request) = (scene(&[]), request(&READY, &GOAL, 30.0));
+    let dir = tempfile::tempdir().unwrap();
+    // The CLI reads YAML, as `ros2 topic echo` writes it.
+    let scene_file = dir.path().join("scene.yaml");
+    let request_file = dir.path().join("request.yaml");
+    std::fs::write(&scene_file, serde_yaml::to_string(&scene).unwrap()).unwrap();
+    std::fs::write(&request_file, serde_yaml::to_string(&request).unwrap()).unwrap();
+    let out = dpmp(&[
+        "plan-moveit",
+        "--scene",
+        arg(&scene_file),
+        "--request",
+        arg(&request_file),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let from_cli: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let server = start(test_config());
+    let (status, from_http) = post_json(
+        &client(),
+        &server.url("/v1/moveit/plan"),
+        body(&scene, &request),
+    );
+    assert_eq!(status, 200, "{from_http}");
+    assert_eq!(from_http["status"], "optimal", "{from_http}");
+    assert_valid(&openapi(), "post", "/v1/moveit/plan", 200, &from_http);
+    // A refused start answers 200 with MoveIt's code, in the schema too.
+    let (status, refused) = post_json(
+        &client(),
+        &server.url("/v1/moveit/plan"),
+        body(&blocked, &request),
+    );
+    assert_eq!(status, 200, "{refused}");
+    assert_eq!(refused["moveit"]["error_code_name"], "START_STATE_IN_COLLISION");
+    assert_valid(&openapi(), "post", "/v1/moveit/plan", 200, &refused);
+    assert_eq!(from_http["moveit"]["error_code"]["val"], 1);
+    assert_eq!(from_http["moveit"]["error_code_name"], "SUCCESS");
+    let points = from_http["moveit"]["trajectory"]["joint_trajectory"]["points"]
+        .as_array()
+        .unwrap();
+    assert_eq!(points.len(), 150);
+    let last = points[149]["positions"].as_array().unwrap();
+    for (q, g) in last.iter().zip(GOAL) {
+        assert!((q.as_f64().unwrap() - g).abs() < 1e-6);
+    }
+    // The finger joints of the start state are reported, not used.
+    let warnings = from_http["moveit"]["warnings"].to_string();
+    assert!(warnings.contains("panda_finger_joint1"), "{warnings}");
+    assert_eq!(
+        serde_json::to_string(&deterministic(from_cli)).unwrap(),
+        serde_json::to_string(&deterministic(from_http)).unwrap()
+    );
+}
+
+#[test]
+fn error_codes_follow_the_diagnosis_and_the_solver() {
+    let robot = panda();
+    let plan = |scene: &Value, request: &Value| {
+        let query = MoveItQuery::read(&scene.to_string(), &request.to_string(), &robot).unwrap();
+        plan_moveit(
+            &query,
+            &MoveItPlanOptions::default(),
+            &robot,
+            &SolveControl::default(),
+        )
+        .unwrap()
+    };
+    let blocked_start = scene(&[ball_on_tcp("on start", &READY, 0.04)]);
+    let answer = plan(&blocked_start, &request(&READY, &GOAL, 30.0));
+    assert_eq!(answer.moveit.error_code_name, "START_STATE_IN_COLLISION");
+    assert_eq!(answer.moveit.error_code.val, -10);
+    assert!(answer.moveit.trajectory.joint_trajectory.points.is_empty());
+    assert!(answer.result.reason.unwrap().contains("on start"));
+    let blocked_goal = scene(&[ball_on_tcp("on goal", &GOAL, 0.04)]);
+    let answer = plan(&blocked_goal, &request(&READY, &GOAL, 30.0));
+    assert_eq!(answer.moveit.error_code_name, "GOAL_IN_COLLISION");
+    assert_eq!(answer.moveit.error_code.val, -12);
+    // A planning time too short to verify even the prior mean.
+    let answer = plan(&scene(&[]), &request(&READY, &GOAL, 1e-6));
+    assert_eq!(answer.moveit.error_code_name, "TIMED_OUT");
+    assert_eq!(answer.result.stop_reason, dpmp::optim::StopReason::Deadline);
+}
+
+#[test]
+fn bad_queries_are_refused_naming_the_field() {
+    let server = start(test_config());
+    let url = server.url("/v1/moveit/plan");
+    let c = client();
+    let good_scene = scene(&[]);
+    let good_request = request(&READY, &GOAL, 30.0);
+    let mut outside = GOAL;
+    outside[3] = 0.5;
+    let mut unknown_joint = good_request.clone();
+    unknown_joint["goal_constraints"][0]["joint_constraints"][2]["joint_name"] = json!("elbow");
+    let torus = scene(&[json!({
+        "id": "t", "primitives": [{"type": "torus", "dimensions": [0.1]}],
+        "primitive_poses": [{"position": [0.5, 0, 0.5]}]
+    })]);
+    let skewed = scene(&[json!({
+        "id": "q", "primitives": [{"type": 1, "dimensions": [0.1, 0.1, 0.1]}],
+        "primitive_poses": [{"position": [0.5, 0, 0.5], "orientation": {"x": 0, "y": 0, "z": 0, "w": 2}}]
+    })]);
+    let cases: Vec<(String, &str, &str)> = vec![
+        (
+            body(&good_scene, &request(&READY, &outside, 30.0)),
+            "motion_plan_request.goal_constraints[0].joint_constraints[3].position",
+            "INVALID_GOAL_CONSTRAINTS",
+        ),
+        (
+            body(&good_scene, &unknown_joint),
+            "motion_plan_request.goal_constraints[0].joint_constraints[2].joint_name",
+            "elbow",
+        ),
+        (
+            body(&torus, &good_request),
+            "planning_scene.world.collision_objects[2].primitives[0].type",
+            "torus",
+        ),
+        (
+            body(&skewed, &good_request),
+            "planning_scene.world.collision_objects[2].primitive_poses[0].orientation",
+            "unit",
+        ),
+        (
+            json!({"planning_scene": good_scene}).to_string(),
+            "motion_plan_request",
+            "required",
+        ),
+        (
+            json!({"planning_scene": good_scene, "motion_plan_request": good_request, "duration_s": "soon"}).to_string(),
+            "duration_s",
+            "auto",
+        ),
+        (
+            json!({"planning_scene": good_scene, "motion_plan_request": good_request, "speed": 1}).to_string(),
+            "speed",
+            "unknown field",
+        ),
+    ];
+    for (text, expected_field, words) in cases {
+        let (status, answer) = post_json(&c, &url, text);
+        assert_eq!(status, 422, "{answer}");
+        assert_eq!(code(&answer), "invalid_input", "{answer}");
+        assert_eq!(field(&answer), Some(expected_field), "{answer}");
+        assert!(answer.to_string().contains(words), "{answer}");
+    }
+    // The CLI: exit 2, the field in the message.
+    let dir = tempfile::tempdir().unwrap();
+    let scene_file = dir.path().join("scene.json");
+    let request_file = dir.path().join("request.json");
+    std::fs::write(&scene_file, torus.to_string()).unwrap();
+    std::fs::write(&request_file, good_request.to_string()).unwrap();
+    let out = dpmp(&[
+        "plan-moveit",
+        "--scene",
+        arg(&scene_file),
+        "--request",
+        arg(&request_file),
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        stderr(&out).contains("primitives[0].type"),
+        "{}",
+        stderr(&out)
+    );
+}
+
+#[test]
+fn auto_duration_is_the_shortest_within_ten_percent_that_keeps_the_rate_limits() {
+    let robot = panda();
+    for (velocity_scaling, goal) in [
+        (0.0, GOAL),
+        (0.5, GOAL),
+        (0.0, [-0.4, 0.2, -0.3, -1.5, -0.2, 2.2, 1.2]),
+    ] {
+        let mut request = request(&READY, &goal, 30.0);
+        request["max_velocity_scaling_factor"] = json!(velocity_scaling);
+        let query =
+            MoveItQuery::read(&scene(&[]).to_string(), &request.to_string(), &robot).unwrap();
+        let answer = plan_moveit(
+            &query,
+            &MoveItPlanOptions::default(),
+            &robot,
+            &SolveControl::default(),
+        )
+        .unwrap();
+        let result = &answer.result;
+        assert_eq!(
+            result.status,
+            dpmp::optim::Status::Optimal,
+            "{:?}",
+            result.reason
+        );
+        // Within the limits at the chosen duration ...
+        let k = time_scale_to_limits(result);
+        assert!(k <= 1.0 + 1e-6, "rate ratio scale {k}");
+        // ... and a duration 10 % shorter breaks one on the same path
+        // (velocity ratios scale with 1/T, acceleration 1/T², jerk 1/T³).
+        assert!(
+            k * AUTO_DURATION_STEP > 1.0,
+            "k {k} at {} s",
+            result.duration_s
+        );
+        let last = &result.trajectory.points.last().unwrap().time_from_start;
+        assert!((last - result.duration_s).abs() < 1e-9);
+    }
+}
