@@ -10,6 +10,7 @@ pub mod hard_set;
 pub mod make_problems;
 pub mod methods;
 pub mod model_suite;
+pub mod moveit_suite;
 pub mod plots;
 pub mod problem_file;
 pub mod report;

@@ -9,6 +9,8 @@
 //! - `dpmp bench world --data DIR [--split test] [--model DIR] [--out FILE]`:
 //!   plans with no world, the depth-sensed world and the true scene, each
 //!   checked against the true scene
+//! - `dpmp bench moveit --problems DIR [--out DIR] [--limit N]`:
+//!   MotionBenchMaker's MoveIt problems, a table per scene
 
 use crate::bench::{
     self, method_from_name, HardSettings, MakeSettings, RunSettings, DEFAULT_METHODS,
@@ -65,6 +67,33 @@ pub enum BenchCommand {
     /// Plan a dataset's targets with no world, the world sensed from depth
     /// and the true scene; check each plan against the true scene.
     World(WorldArgs),
+    /// Plan MotionBenchMaker's MoveIt problems (sceneNNNN.yaml /
+    /// requestNNNN.yaml pairs) on default options; a table per scene.
+    Moveit(MoveItBenchArgs),
+}
+
+/// Arguments of `dpmp bench moveit`.
+#[derive(Debug, clap::Args)]
+pub struct MoveItBenchArgs {
+    /// A folder of sceneNNNN.yaml / requestNNNN.yaml pairs, or of such
+    /// folders (one per scene family).
+    #[arg(long)]
+    pub problems: PathBuf,
+    /// Output folder: report.json, report.md, plan_time.png, answers/.
+    #[arg(long, default_value = "bench-moveit")]
+    pub out: PathBuf,
+    /// Run only the first N problems of each family.
+    #[arg(long)]
+    pub limit: Option<usize>,
+    /// Required clearance (m).
+    #[arg(long, default_value_t = crate::moveit::plan::MOVEIT_DEFAULT_CLEARANCE_M)]
+    pub clearance: f64,
+    /// `auto` or seconds.
+    #[arg(long, default_value = "auto")]
+    pub duration: crate::moveit::DurationChoice,
+    /// The robot.
+    #[command(flatten)]
+    pub robot: super::RobotArgs,
 }
 
 /// Arguments of `dpmp bench world`.
@@ -138,6 +167,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
         Some(BenchCommand::MakeProblems(m)) => make(m),
         Some(BenchCommand::LabelTypical(l)) => label(l),
         Some(BenchCommand::World(w)) => world(w),
+        Some(BenchCommand::Moveit(m)) => moveit(m),
         None => run_suite(args),
     }
 }
@@ -210,6 +240,36 @@ fn world(args: WorldArgs) -> Result<()> {
         eval.targets, eval.split, eval.skipped
     );
     print!("{}", bench::world_eval::markdown(&eval));
+    Ok(())
+}
+
+fn moveit(args: MoveItBenchArgs) -> Result<()> {
+    use crate::bench::moveit_suite::{find_problems, run_moveit_bench, write_report};
+    if args.limit == Some(0) {
+        return Err(Error::invalid("--limit", "must be at least 1"));
+    }
+    let robot = args.robot.load()?;
+    let mut problems = find_problems(&args.problems)?;
+    if let Some(limit) = args.limit {
+        let mut kept: std::collections::BTreeMap<String, usize> = Default::default();
+        problems.retain(|p| {
+            let n = kept.entry(p.family.clone()).or_default();
+            *n += 1;
+            *n <= limit
+        });
+    }
+    let options = crate::moveit::MoveItPlanOptions {
+        clearance_m: args.clearance,
+        duration_s: args.duration,
+        ..Default::default()
+    };
+    std::fs::create_dir_all(&args.out).map_err(|e| Error::write(&args.out, e.to_string()))?;
+    let progress = crate::progress::bar(true, problems.len() as u64, "MoveIt problems");
+    let report = run_moveit_bench(&problems, &options, &robot, &args.out, &progress)?;
+    progress.finish_and_clear();
+    write_report(&report, &args.out)?;
+    print!("{}", crate::bench::moveit_suite::markdown(&report));
+    eprintln!("report written to {}", args.out.display());
     Ok(())
 }
 

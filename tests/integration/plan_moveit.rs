@@ -115,7 +115,10 @@ fn the_cli_and_the_service_give_the_same_answer_from_yaml_and_json() {
         body(&blocked, &request),
     );
     assert_eq!(status, 200, "{refused}");
-    assert_eq!(refused["moveit"]["error_code_name"], "START_STATE_IN_COLLISION");
+    assert_eq!(
+        refused["moveit"]["error_code_name"],
+        "START_STATE_IN_COLLISION"
+    );
     assert_valid(&openapi(), "post", "/v1/moveit/plan", 200, &refused);
     assert_eq!(from_http["moveit"]["error_code"]["val"], 1);
     assert_eq!(from_http["moveit"]["error_code_name"], "SUCCESS");
