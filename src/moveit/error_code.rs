@@ -3,7 +3,7 @@
 //! request proven infeasible, the part the diagnosis blamed
 //! ([`Culprit`]).
 
-use crate::optim::infeasible::diagnose::Culprit;
+use crate::optim::report::Culprit;
 use crate::optim::{OptimizeResponse, StopReason};
 use serde::Serialize;
 

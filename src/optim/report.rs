@@ -373,7 +373,7 @@ pub struct OptimizeResponse {
     /// diagnosis found impossible (not serialised: `reason` says it in
     /// words; MoveIt's error codes map it).
     #[serde(skip)]
-    pub culprit: Option<super::infeasible::diagnose::Culprit>,
+    pub culprit: Option<Culprit>,
 }
 
 impl OptimizeResponse {
@@ -400,4 +400,24 @@ mod tests {
             assert_eq!(serde_json::to_value(s).unwrap(), s.as_str());
         }
     }
+}
+
+/// What the diagnosis before a solve (`Problem::diagnosis`) found: which part of the request no
+/// trajectory can meet (for callers that map it, e.g. MoveIt's error
+/// codes).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Culprit {
+    /// `start` is outside the joint limits.
+    StartOutsideLimits,
+    /// `start` is closer to an obstacle than `clearance_m`.
+    StartInCollision,
+    /// `options.final_configuration` is outside the joint limits.
+    GoalOutsideLimits,
+    /// The goal (`options.final_configuration`, or `goal.position` buried
+    /// deep in an obstacle) is closer to an obstacle than `clearance_m`.
+    GoalInCollision,
+    /// `goal.position` is out of reach, or inverse kinematics to it fails.
+    GoalUnreachable,
+    /// A configuration via point is outside the joint limits.
+    ViaPointOutsideLimits,
 }

@@ -384,5 +384,8 @@ fn a_missing_top_level_field_is_named_over_http() {
         &server.url("/v1/optimize"),
         r#"{"duration_s": 2}"#,
     );
-    assert_eq!((status, field(&body)), (422, Some("prior")), "{body}");
+    // Without `prior` the request gets the smooth prior, which needs the
+    // start: the first missing field is `start`, and the message says why.
+    assert_eq!((status, field(&body)), (422, Some("start")), "{body}");
+    assert!(body.to_string().contains("smooth prior"), "{body}");
 }

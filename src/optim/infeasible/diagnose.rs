@@ -2,29 +2,10 @@
 //! can meet, each reported with the constraint it breaks.
 
 use crate::optim::problem::Problem;
+use crate::optim::report::Culprit;
 use crate::optim::tolerances::FEASIBILITY_TOLERANCE;
 use crate::robot::{IkOptions, IkTarget};
 use nalgebra::Point3;
-
-/// What a [`Problem::diagnosis`] found: which part of the request no
-/// trajectory can meet (for callers that map it, e.g. MoveIt's error
-/// codes).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Culprit {
-    /// `start` is outside the joint limits.
-    StartOutsideLimits,
-    /// `start` is closer to an obstacle than `clearance_m`.
-    StartInCollision,
-    /// `options.final_configuration` is outside the joint limits.
-    GoalOutsideLimits,
-    /// The goal (`options.final_configuration`, or `goal.position` buried
-    /// deep in an obstacle) is closer to an obstacle than `clearance_m`.
-    GoalInCollision,
-    /// `goal.position` is out of reach, or inverse kinematics to it fails.
-    GoalUnreachable,
-    /// A configuration via point is outside the joint limits.
-    ViaPointOutsideLimits,
-}
 
 /// A proof before any solve that the problem is infeasible.
 #[derive(Clone, Debug, PartialEq)]
