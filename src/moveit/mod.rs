@@ -6,7 +6,9 @@
 //!   MotionBenchMaker write it, or JSON) → the obstacles of the request
 //!   schema, every primitive and mesh posed in the robot's base frame.
 //! - [`motion_plan_request`]: a `MotionPlanRequest` → the start, the goal,
-//!   the scaling factors and the planning time, in the robot's joints.
+//!   the scaling factors and the planning time, in the robot's joints;
+//!   [`fingers`]: the finger joints of its start state pose the fingers'
+//!   collision geometry.
 //! - [`plan`]: both planned ([`plan_moveit`], what `dpmp plan-moveit` and
 //!   `POST /v1/moveit/plan` call): the optimise answer, a
 //!   `moveit_msgs/RobotTrajectory` and an [`error_code`].
@@ -17,6 +19,7 @@
 //! the robot and a world object) is said in the warnings.
 
 pub mod error_code;
+pub mod fingers;
 pub mod motion_plan_request;
 pub mod plan;
 pub mod planning_scene;

@@ -2,14 +2,15 @@
 //! fast, in the robot's joints.
 //!
 //! Read: `start_state.joint_state` (by joint name; the robot's joints must
-//! all be there; other joints, e.g. the fingers, are reported and not
-//! used), the first of `goal_constraints` (its `joint_constraints`: a final
+//! all be there; the finger joints pose the fingers ([`super::fingers`]);
+//! other joints are reported and not used), the first of `goal_constraints` (its `joint_constraints`: a final
 //! configuration, every arm joint given, each within the joint's limits;
 //! or a `position_constraints` region's centre and size with an
 //! `orientation_constraints`' z axis as the approach direction),
 //! `max_velocity_scaling_factor` and `max_acceleration_scaling_factor` (0
 //! means 1, as in MoveIt) and `allowed_planning_time` (s).
 
+use super::fingers::{finger_poses, robot_with_fingers, FingerPose};
 use crate::optim::{Goal, GoalApproach};
 use crate::robot::Robot;
 use crate::{Error, Result};
@@ -21,6 +22,9 @@ use serde::Deserialize;
 pub struct MoveItRequest {
     /// The start configuration, one value per robot joint in its order.
     pub start: Vec<f64>,
+    /// Where the start state puts the fingers (none when it does not give
+    /// their joints or the robot has no finger links).
+    pub fingers: Vec<FingerPose>,
     /// Where to end.
     pub goal: MoveItGoal,
     /// Factor in (0, 1] on the velocity limits.
@@ -127,10 +131,26 @@ struct OrientationConstraint {
     absolute_z_axis_tolerance: Option<f64>,
 }
 
+impl MoveItRequest {
+    /// `robot` with its fingers where the start state puts them (borrowed
+    /// unchanged when they are already there).
+    pub fn robot<'r>(&self, robot: &'r Robot) -> Result<std::borrow::Cow<'r, Robot>> {
+        robot_with_fingers(robot, &self.fingers)
+    }
+}
+
 impl MotionPlanRequest {
     fn for_robot(self, robot: &Robot) -> Result<MoveItRequest> {
         let mut warnings = Vec::new();
-        let start = configuration_by_name(&self.start_state.joint_state, robot, &mut warnings)?;
+        let state = &self.start_state.joint_state;
+        let (fingers, finger_joints) = finger_poses(
+            "start_state.joint_state",
+            &state.name,
+            &state.position,
+            robot,
+            &mut warnings,
+        )?;
+        let start = configuration_by_name(state, robot, &finger_joints, &mut warnings)?;
         if self.goal_constraints.len() > 1 {
             warnings.push(format!(
                 "{} goal constraint sets: the first is planned for",
@@ -148,6 +168,7 @@ impl MotionPlanRequest {
         };
         Ok(MoveItRequest {
             start,
+            fingers,
             goal,
             velocity_scaling: scaling(
                 "max_velocity_scaling_factor",
@@ -186,10 +207,12 @@ fn scaling(field: &str, value: f64) -> Result<f64> {
 }
 
 /// The robot's joints from a joint state, by name; joints the robot lacks
-/// are reported in `warnings`.
+/// (other than the finger joints `used` elsewhere) are reported in
+/// `warnings`.
 fn configuration_by_name(
     state: &JointState,
     robot: &Robot,
+    used: &[String],
     warnings: &mut Vec<String>,
 ) -> Result<Vec<f64>> {
     const FIELD: &str = "start_state.joint_state";
@@ -216,7 +239,7 @@ fn configuration_by_name(
     let unused: Vec<&str> = state
         .name
         .iter()
-        .filter(|n| !robot.joint_names().contains(n))
+        .filter(|n| !robot.joint_names().contains(n) && !used.contains(n))
         .map(String::as_str)
         .collect();
     if !unused.is_empty() {
@@ -364,8 +387,16 @@ start_state:
         );
         assert_eq!((r.velocity_scaling, r.acceleration_scaling), (0.5, 1.0));
         assert_eq!(r.planning_time_s, Some(60.0));
+        // MotionBenchMaker's 0.065 m fingers are clamped to franka's 0.04.
+        let openings: Vec<f64> = r.fingers.iter().map(|f| f.opening_m).collect();
+        assert_eq!(openings, [0.04, 0.04]);
         assert!(
-            r.warnings[0].contains("panda_finger_joint1"),
+            r.warnings[0].contains("panda_finger_joint1 = 0.065 is outside its limits"),
+            "{:?}",
+            r.warnings
+        );
+        assert!(
+            !r.warnings.iter().any(|w| w.contains("not used")),
             "{:?}",
             r.warnings
         );

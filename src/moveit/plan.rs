@@ -245,8 +245,9 @@ impl MoveItQuery {
     }
 }
 
-/// Plan `query` for `robot` with `options`, under `ctl` and the request's
-/// `allowed_planning_time` (counted from the call).
+/// Plan `query` for `robot` (its fingers where the start state puts them)
+/// with `options`, under `ctl` and the request's `allowed_planning_time`
+/// (counted from the call).
 pub fn plan_moveit(
     query: &MoveItQuery,
     options: &MoveItPlanOptions,
@@ -260,9 +261,10 @@ pub fn plan_moveit(
         deadline: earliest(ctl.deadline, planning_time.map(|t| started + secs(t))),
         ..ctl.clone()
     };
+    let robot = query.request.robot(robot)?;
     let result = match options.duration_s {
-        DurationChoice::Auto => optimize_auto_duration(&optimize_request, robot, &ctl)?,
-        DurationChoice::Seconds(_) => optimize_with(&optimize_request, robot, &ctl)?,
+        DurationChoice::Auto => optimize_auto_duration(&optimize_request, &robot, &ctl)?,
+        DurationChoice::Seconds(_) => optimize_with(&optimize_request, &robot, &ctl)?,
     };
     let code = MoveItErrorCode::of(&result);
     let mut joint_trajectory = result.trajectory.clone();

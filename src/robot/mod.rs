@@ -10,6 +10,8 @@
 //! - [`limits_file`]: acceleration and jerk limits from a MoveIt-style
 //!   `joint_limits.yaml` beside the URDF;
 //! - [`collision`]: the link collision geometry ([`LinkShape`]);
+//! - [`side_link`]: links fixed off the chain (the fingers), moved with
+//!   their shapes ([`Robot::with_side_link_moved`]);
 //! - [`mesh`], [`mesh_files`] and [`hull`]: collision meshes (STL, OBJ),
 //!   where their files are found, and the convex hull that contains each
 //!   one (the conservative geometry every clearance is measured against);
@@ -36,12 +38,14 @@ pub mod limits_file;
 pub mod mesh;
 pub mod mesh_files;
 pub mod reach;
+pub mod side_link;
 pub mod urdf;
 
 pub use collision::{LinkShape, ShapeGeometry};
 pub use fk::Frames;
 pub use ik::{IkOptions, IkSolution, IkTarget};
 pub use mesh_files::MeshFiles;
+pub use side_link::SideLink;
 
 use crate::{Error, Result};
 use chain::ChainStep;
@@ -140,6 +144,8 @@ pub struct Robot {
     /// The step of each actuated joint (its child link is `step + 1`).
     pub(crate) dof_step: Vec<usize>,
     pub(crate) shapes: Vec<LinkShape>,
+    /// Links fixed off the chain (the fingers) and their shapes.
+    pub(crate) side_links: Vec<SideLink>,
     pub(crate) home: Vec<f64>,
     /// Loading remarks that are not errors (open meshes).
     pub(crate) warnings: Vec<String>,

@@ -13,6 +13,7 @@
 use super::chain::{isometry_from_xyz_rpy, ChainStep, Motion};
 use super::collision::{geometry_from_urdf, LinkShape};
 use super::mesh_files::MeshFiles;
+use super::side_link::SideLink;
 use super::{JointLimit, Robot};
 use crate::{Error, Result};
 use nalgebra::{Isometry3, Unit, Vector3};
@@ -76,7 +77,7 @@ fn build(model: &urdf_rs::Robot, base: &str, tip: &str, files: &MeshFiles) -> Re
         ));
     }
     let mut warnings = Vec::new();
-    let shapes = collect_shapes(&tree, &link_names, files, &mut warnings)?;
+    let (shapes, side_links) = collect_shapes(&tree, &link_names, files, &mut warnings)?;
     let home = limits.iter().map(JointLimit::mid).collect();
     Ok(Robot {
         name: model.name.clone(),
@@ -87,6 +88,7 @@ fn build(model: &urdf_rs::Robot, base: &str, tip: &str, files: &MeshFiles) -> Re
         steps,
         dof_step,
         shapes,
+        side_links,
         home,
         warnings,
         lever_arms: Vec::new(),
@@ -240,20 +242,27 @@ fn joint_limit(joint: &urdf_rs::Joint) -> Result<JointLimit> {
 }
 
 /// Collision shapes of every chain link, plus those of side links hanging
-/// off it through fixed joints (moved into the chain link's frame).
+/// off it through fixed joints (moved into the chain link's frame), and
+/// the side links themselves (which shapes each carries).
 fn collect_shapes(
     tree: &Tree,
     link_names: &[String],
     files: &MeshFiles,
     warnings: &mut Vec<String>,
-) -> Result<Vec<LinkShape>> {
+) -> Result<(Vec<LinkShape>, Vec<SideLink>)> {
     let mut shapes = Vec::new();
+    let mut side_links: Vec<SideLink> = Vec::new();
     for (index, name) in link_names.iter().enumerate() {
         let next_on_chain = link_names.get(index + 1).map(String::as_str);
-        let mut stack: Vec<(&str, Isometry3<f64>)> = vec![(name.as_str(), Isometry3::identity())];
-        while let Some((link, pose)) = stack.pop() {
+        // (link, its pose in the chain link's frame, the side link it is under)
+        let mut stack: Vec<(&str, Isometry3<f64>, Option<usize>)> =
+            vec![(name.as_str(), Isometry3::identity(), None)];
+        while let Some((link, pose, side)) = stack.pop() {
             for (c, collision) in tree.links[link].collision.iter().enumerate() {
                 let element = format!("link[{link}].collision[{c}]");
+                if let Some(side) = side {
+                    side_links[side].shapes.push(shapes.len());
+                }
                 shapes.push(LinkShape {
                     link: index,
                     link_name: name.clone(),
@@ -282,11 +291,21 @@ fn collect_shapes(
                         ),
                     ));
                 }
-                stack.push((joint.child.link.as_str(), pose * joint_origin(joint)?));
+                let child_pose = pose * joint_origin(joint)?;
+                let side = side.or_else(|| {
+                    side_links.push(SideLink {
+                        name: joint.child.link.clone(),
+                        chain_link: index,
+                        pose: child_pose,
+                        shapes: Vec::new(),
+                    });
+                    Some(side_links.len() - 1)
+                });
+                stack.push((joint.child.link.as_str(), child_pose, side));
             }
         }
     }
-    Ok(shapes)
+    Ok((shapes, side_links))
 }
 
 #[cfg(test)]

@@ -9,7 +9,7 @@ use crate::common::http::{
     assert_valid, client, code, field, openapi, post_json, start, test_config, without_timing,
 };
 use crate::common::robot::panda;
-use dpmp::moveit::{plan_moveit, MoveItPlanOptions, MoveItQuery};
+use dpmp::moveit::{plan_moveit, MoveItPlanOptions, MoveItPlanResponse, MoveItQuery};
 use dpmp::optim::auto_duration::{time_scale_to_limits, AUTO_DURATION_STEP};
 use dpmp::optim::SolveControl;
 use serde_json::{json, Value};
@@ -80,6 +80,19 @@ fn ball_on_tcp(id: &str, q: &[f64], radius: f64) -> Value {
     })
 }
 
+/// `request` in `scene` planned with the defaults, in the library.
+fn plan(scene: &Value, request: &Value) -> MoveItPlanResponse {
+    let robot = panda();
+    let query = MoveItQuery::read(&scene.to_string(), &request.to_string(), &robot).unwrap();
+    plan_moveit(
+        &query,
+        &MoveItPlanOptions::default(),
+        &robot,
+        &SolveControl::default(),
+    )
+    .unwrap()
+}
+
 #[test]
 fn the_cli_and_the_service_give_the_same_answer_from_yaml_and_json() {
     let blocked = scene(&[ball_on_tcp("on start", &READY, 0.04)]);
@@ -130,9 +143,9 @@ fn the_cli_and_the_service_give_the_same_answer_from_yaml_and_json() {
     for (q, g) in last.iter().zip(GOAL) {
         assert!((q.as_f64().unwrap() - g).abs() < 1e-6);
     }
-    // The finger joints of the start state are reported, not used.
-    let warnings = from_http["moveit"]["warnings"].to_string();
-    assert!(warnings.contains("panda_finger_joint1"), "{warnings}");
+    // The finger joints of the start state pose the fingers: nothing to
+    // warn about within their limits.
+    assert_eq!(from_http["moveit"]["warnings"], json!([]));
     assert_eq!(
         serde_json::to_string(&deterministic(from_cli)).unwrap(),
         serde_json::to_string(&deterministic(from_http)).unwrap()
@@ -141,17 +154,6 @@ fn the_cli_and_the_service_give_the_same_answer_from_yaml_and_json() {
 
 #[test]
 fn error_codes_follow_the_diagnosis_and_the_solver() {
-    let robot = panda();
-    let plan = |scene: &Value, request: &Value| {
-        let query = MoveItQuery::read(&scene.to_string(), &request.to_string(), &robot).unwrap();
-        plan_moveit(
-            &query,
-            &MoveItPlanOptions::default(),
-            &robot,
-            &SolveControl::default(),
-        )
-        .unwrap()
-    };
     let blocked_start = scene(&[ball_on_tcp("on start", &READY, 0.04)]);
     let answer = plan(&blocked_start, &request(&READY, &GOAL, 30.0));
     assert_eq!(answer.moveit.error_code_name, "START_STATE_IN_COLLISION");
@@ -166,6 +168,66 @@ fn error_codes_follow_the_diagnosis_and_the_solver() {
     let answer = plan(&scene(&[]), &request(&READY, &GOAL, 1e-6));
     assert_eq!(answer.moveit.error_code_name, "TIMED_OUT");
     assert_eq!(answer.result.stop_reason, dpmp::optim::StopReason::Deadline);
+}
+
+/// `request` with both finger joints of its start state at `opening` (m).
+fn with_fingers(mut request: Value, opening: f64) -> Value {
+    let positions = &mut request["start_state"]["joint_state"]["position"];
+    positions[7] = json!(opening);
+    positions[8] = json!(opening);
+    request
+}
+
+#[test]
+fn the_start_states_finger_joints_pose_the_fingers() {
+    let robot = panda();
+    // A 2 cm ball on the goal's TCP, between the fingertips: 1.8 cm from
+    // the open fingers' inner faces, crushed by closed ones.
+    let world = scene(&[ball_on_tcp("berry", &GOAL, 0.02)]);
+    let goal_code = |opening: f64| {
+        let answer = plan(&world, &with_fingers(request(&READY, &GOAL, 30.0), opening));
+        (answer.moveit.error_code_name, answer.moveit.warnings)
+    };
+    for opening in [0.04, 0.03] {
+        let (code, _) = goal_code(opening);
+        assert_ne!(code, "GOAL_IN_COLLISION", "fingers at {opening} m");
+    }
+    for opening in [0.0, 0.01] {
+        let (code, _) = goal_code(opening);
+        assert_eq!(code, "GOAL_IN_COLLISION", "fingers at {opening} m");
+    }
+    // Beyond franka's 0.04 m the fingers stay at 0.04, with a warning.
+    let (code, warnings) = goal_code(0.065);
+    assert_ne!(code, "GOAL_IN_COLLISION");
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.contains("0.065 is outside its limits")),
+        "{warnings:?}"
+    );
+    // The independent check: the ball's distance to the finger shapes
+    // moved by hand (the loaded shapes shifted along the finger's y axis)
+    // at the goal, against the planner's own verdict above.
+    let frames = robot.fk(&GOAL);
+    let ball = robot.tcp_pose(&GOAL).translation.vector;
+    let nearest_finger = |opening: f64| {
+        let mut best = f64::INFINITY;
+        for side in robot.side_links() {
+            let shift = (opening - side.offset_along(&nalgebra::Vector3::y()))
+                * (side.pose.rotation * nalgebra::Vector3::y());
+            let link_pose = frames.poses[side.chain_link];
+            let local = link_pose.inverse() * nalgebra::Point3::from(ball) - shift;
+            for &s in &side.shapes {
+                let d = robot.collision_shapes()[s]
+                    .geometry
+                    .signed_distance(&[local.x, local.y, local.z]);
+                best = best.min(d);
+            }
+        }
+        best - 0.02
+    };
+    assert!(nearest_finger(0.04) > 0.015, "{}", nearest_finger(0.04));
+    assert!(nearest_finger(0.0) < 0.0, "{}", nearest_finger(0.0));
 }
 
 #[test]
@@ -254,7 +316,6 @@ fn bad_queries_are_refused_naming_the_field() {
 
 #[test]
 fn auto_duration_is_the_shortest_within_ten_percent_that_keeps_the_rate_limits() {
-    let robot = panda();
     for (velocity_scaling, goal) in [
         (0.0, GOAL),
         (0.5, GOAL),
@@ -262,15 +323,7 @@ fn auto_duration_is_the_shortest_within_ten_percent_that_keeps_the_rate_limits()
     ] {
         let mut request = request(&READY, &goal, 30.0);
         request["max_velocity_scaling_factor"] = json!(velocity_scaling);
-        let query =
-            MoveItQuery::read(&scene(&[]).to_string(), &request.to_string(), &robot).unwrap();
-        let answer = plan_moveit(
-            &query,
-            &MoveItPlanOptions::default(),
-            &robot,
-            &SolveControl::default(),
-        )
-        .unwrap();
+        let answer = plan(&scene(&[]), &request);
         let result = &answer.result;
         assert_eq!(
             result.status,
