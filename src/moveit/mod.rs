@@ -8,7 +8,8 @@
 //! - [`motion_plan_request`]: a `MotionPlanRequest` → the start, the goal,
 //!   the scaling factors and the planning time, in the robot's joints;
 //!   [`fingers`]: the finger joints of its start state pose the fingers'
-//!   collision geometry.
+//!   collision geometry; [`joint_goal`]: a joint goal's tolerances →
+//!   the configuration planned to.
 //! - [`plan`]: both planned ([`plan_moveit`], what `dpmp plan-moveit` and
 //!   `POST /v1/moveit/plan` call): the optimise answer, a
 //!   `moveit_msgs/RobotTrajectory` and an [`error_code`].
@@ -20,6 +21,7 @@
 
 pub mod error_code;
 pub mod fingers;
+pub mod joint_goal;
 pub mod motion_plan_request;
 pub mod plan;
 pub mod planning_scene;

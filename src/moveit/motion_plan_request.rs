@@ -11,6 +11,7 @@
 //! means 1, as in MoveIt) and `allowed_planning_time` (s).
 
 use super::fingers::{finger_poses, robot_with_fingers, FingerPose};
+use super::joint_goal::JointGoal;
 use crate::optim::{Goal, GoalApproach};
 use crate::robot::Robot;
 use crate::{Error, Result};
@@ -40,8 +41,8 @@ pub struct MoveItRequest {
 /// A MoveIt goal.
 #[derive(Clone, Debug, PartialEq)]
 pub enum MoveItGoal {
-    /// A configuration, one value per robot joint.
-    Configuration(Vec<f64>),
+    /// A configuration, one value per robot joint, with its tolerances.
+    Configuration(JointGoal),
     /// A TCP position (and approach direction).
     Position(Goal),
 }
@@ -98,6 +99,10 @@ struct Constraints {
 struct JointConstraint {
     joint_name: String,
     position: f64,
+    #[serde(default)]
+    tolerance_above: f64,
+    #[serde(default)]
+    tolerance_below: f64,
 }
 
 #[derive(Debug, Deserialize)]
@@ -283,8 +288,9 @@ impl Constraints {
                     c.joint_name
                 ));
             }
-            let mut q = Vec::with_capacity(robot.dof());
-            for (j, joint) in robot.joint_names().iter().enumerate() {
+            let mut goal = JointGoal::exact(Vec::new());
+            let mut indices = Vec::with_capacity(robot.dof());
+            for joint in robot.joint_names() {
                 let Some((k, c)) = self
                     .joint_constraints
                     .iter()
@@ -296,19 +302,45 @@ impl Constraints {
                         format!("the robot's joint {joint:?} has no constraint"),
                     ));
                 };
-                let limit = &robot.limits()[j];
-                if !(c.position.is_finite() && (limit.lower..=limit.upper).contains(&c.position)) {
+                let at = format!("{FIELD}.joint_constraints[{k}]");
+                for (name, value) in [
+                    ("tolerance_above", c.tolerance_above),
+                    ("tolerance_below", c.tolerance_below),
+                ] {
+                    if !(value.is_finite() && (0.0..=std::f64::consts::TAU).contains(&value)) {
+                        return Err(Error::invalid(
+                            format!("{at}.{name}"),
+                            format!("must be in [0, 2π] rad, got {value}"),
+                        ));
+                    }
+                }
+                if !c.position.is_finite() {
                     return Err(Error::invalid(
-                        format!("{FIELD}.joint_constraints[{k}].position"),
-                        format!(
-                            "INVALID_GOAL_CONSTRAINTS: {joint} at {} is outside its limits [{}, {}]",
-                            c.position, limit.lower, limit.upper
-                        ),
+                        format!("{at}.position"),
+                        format!("must be finite, got {}", c.position),
                     ));
                 }
-                q.push(c.position);
+                goal.position.push(c.position);
+                goal.below.push(c.tolerance_below);
+                goal.above.push(c.tolerance_above);
+                indices.push(k);
             }
-            return Ok(MoveItGoal::Configuration(q));
+            if let Err(j) = goal.within_limits(robot) {
+                let (limit, c) = (&robot.limits()[j], &self.joint_constraints[indices[j]]);
+                return Err(Error::invalid(
+                    format!("{FIELD}.joint_constraints[{}].position", indices[j]),
+                    format!(
+                        "INVALID_GOAL_CONSTRAINTS: {} at {} (-{}, +{}) is outside its limits [{}, {}]",
+                        c.joint_name,
+                        c.position,
+                        c.tolerance_below,
+                        c.tolerance_above,
+                        limit.lower,
+                        limit.upper
+                    ),
+                ));
+            }
+            return Ok(MoveItGoal::Configuration(goal));
         }
         let Some(position) = self.position_constraints.first() else {
             return Err(Error::invalid(
@@ -383,7 +415,9 @@ start_state:
         assert_eq!(r.start, vec![0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785]);
         assert_eq!(
             r.goal,
-            MoveItGoal::Configuration(vec![-0.16, 1.08, -1.40, -1.19, 2.43, 2.94, 2.56])
+            MoveItGoal::Configuration(JointGoal::exact(vec![
+                -0.16, 1.08, -1.40, -1.19, 2.43, 2.94, 2.56
+            ]))
         );
         assert_eq!((r.velocity_scaling, r.acceleration_scaling), (0.5, 1.0));
         assert_eq!(r.planning_time_s, Some(60.0));

@@ -201,8 +201,10 @@ impl MoveItQuery {
     }
 
     /// The optimise request of this query with `options`: the scene's
-    /// obstacles, the start, the goal (a final configuration, or a TCP
-    /// position with an approach axis) and the scaling factors.
+    /// obstacles, the start, the goal (the joint constraints' positions as
+    /// the final configuration, which [`plan_moveit`] then settles within
+    /// their tolerances; or a TCP position with an approach axis) and the
+    /// scaling factors.
     pub fn optimize_request(&self, options: &MoveItPlanOptions) -> Result<OptimizeRequest> {
         let query = &self.request;
         let mut solver = options.options.clone();
@@ -213,8 +215,8 @@ impl MoveItQuery {
             ));
         }
         let goal = match &query.goal {
-            MoveItGoal::Configuration(q) => {
-                solver.final_configuration = Some(q.clone());
+            MoveItGoal::Configuration(joints) => {
+                solver.final_configuration = Some(joints.position.clone());
                 None
             }
             MoveItGoal::Position(goal) => Some(goal.clone()),
@@ -243,6 +245,20 @@ impl MoveItQuery {
             task,
         })
     }
+
+    /// Settle `request`'s final configuration within the joint
+    /// constraints' tolerances for `robot` (its fingers posed) and the
+    /// clearance asked ([`super::joint_goal`]); returns what to add to the
+    /// warnings.
+    fn settle_goal(&self, request: &mut OptimizeRequest, robot: &Robot) -> Result<Option<String>> {
+        let MoveItGoal::Configuration(joints) = &self.request.goal else {
+            return Ok(None);
+        };
+        let task = &mut request.task;
+        let chosen = joints.choose(robot, &task.obstacles, task.clearance_m)?;
+        task.options.final_configuration = Some(chosen.configuration);
+        Ok(chosen.note)
+    }
 }
 
 /// Plan `query` for `robot` (its fingers where the start state puts them)
@@ -255,13 +271,14 @@ pub fn plan_moveit(
     ctl: &SolveControl,
 ) -> Result<MoveItPlanResponse> {
     let started = Instant::now();
-    let optimize_request = query.optimize_request(options)?;
+    let robot = query.request.robot(robot)?;
+    let mut optimize_request = query.optimize_request(options)?;
+    let goal_note = query.settle_goal(&mut optimize_request, &robot)?;
     let planning_time = query.request.planning_time_s;
     let ctl = SolveControl {
         deadline: earliest(ctl.deadline, planning_time.map(|t| started + secs(t))),
         ..ctl.clone()
     };
-    let robot = query.request.robot(robot)?;
     let result = match options.duration_s {
         DurationChoice::Auto => optimize_auto_duration(&optimize_request, &robot, &ctl)?,
         DurationChoice::Seconds(_) => optimize_with(&optimize_request, &robot, &ctl)?,
@@ -273,6 +290,7 @@ pub fn plan_moveit(
     }
     let mut warnings = query.scene.warnings.clone();
     warnings.extend(query.request.warnings.iter().cloned());
+    warnings.extend(goal_note);
     Ok(MoveItPlanResponse {
         moveit: MoveItAnswer {
             error_code: code.into(),

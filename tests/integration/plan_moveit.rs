@@ -230,6 +230,66 @@ fn the_start_states_finger_joints_pose_the_fingers() {
     assert!(nearest_finger(0.0) < 0.0, "{}", nearest_finger(0.0));
 }
 
+/// `request` with every goal joint's tolerances at `tolerance` (rad).
+fn with_goal_tolerance(mut request: Value, tolerance: f64) -> Value {
+    for c in request["goal_constraints"][0]["joint_constraints"]
+        .as_array_mut()
+        .unwrap()
+    {
+        c["tolerance_above"] = json!(tolerance);
+        c["tolerance_below"] = json!(tolerance);
+    }
+    request
+}
+
+#[test]
+fn a_goal_with_tolerances_ends_clear_within_them() {
+    // A 6 cm ball on the goal's TCP: the constraints' positions themselves
+    // are in collision.
+    let world = scene(&[ball_on_tcp("berry", &GOAL, 0.06)]);
+    let tight = plan(
+        &world,
+        &with_goal_tolerance(request(&READY, &GOAL, 30.0), 0.001),
+    );
+    assert_eq!(tight.moveit.error_code_name, "GOAL_IN_COLLISION");
+    let tolerance = 0.3;
+    let loose = plan(
+        &world,
+        &with_goal_tolerance(request(&READY, &GOAL, 30.0), tolerance),
+    );
+    assert_ne!(loose.moveit.error_code_name, "GOAL_IN_COLLISION");
+    let end = loose
+        .result
+        .trajectory
+        .points
+        .last()
+        .unwrap()
+        .positions
+        .clone();
+    for (q, g) in end.iter().zip(GOAL) {
+        assert!((q - g).abs() <= tolerance + 1e-6, "{q} vs {g}");
+    }
+    // Its end keeps the clearance (measured to the meshes' hulls).
+    let robot = panda();
+    let read = MoveItQuery::read(
+        &world.to_string(),
+        &request(&READY, &GOAL, 1.0).to_string(),
+        &robot,
+    );
+    let scene = dpmp::scene::Scene::new(read.unwrap().scene.obstacles).unwrap();
+    let clearance = scene.min_clearance(&robot, &robot.fk(&end)).unwrap();
+    assert!(clearance.distance >= 0.005 - 1e-6, "{}", clearance.distance);
+    assert!(
+        loose
+            .moveit
+            .warnings
+            .iter()
+            .any(|w| w.contains("within the joint constraints' tolerances")),
+        "{:?}",
+        loose.moveit.warnings
+    );
+}
+
 #[test]
 fn bad_queries_are_refused_naming_the_field() {
     let server = start(test_config());
@@ -241,6 +301,9 @@ fn bad_queries_are_refused_naming_the_field() {
     outside[3] = 0.5;
     let mut unknown_joint = good_request.clone();
     unknown_joint["goal_constraints"][0]["joint_constraints"][2]["joint_name"] = json!("elbow");
+    let mut negative_tolerance = good_request.clone();
+    negative_tolerance["goal_constraints"][0]["joint_constraints"][5]["tolerance_below"] =
+        json!(-0.1);
     let torus = scene(&[json!({
         "id": "t", "primitives": [{"type": "torus", "dimensions": [0.1]}],
         "primitive_poses": [{"position": [0.5, 0, 0.5]}]
@@ -259,6 +322,11 @@ fn bad_queries_are_refused_naming_the_field() {
             body(&good_scene, &unknown_joint),
             "motion_plan_request.goal_constraints[0].joint_constraints[2].joint_name",
             "elbow",
+        ),
+        (
+            body(&good_scene, &negative_tolerance),
+            "motion_plan_request.goal_constraints[0].joint_constraints[5].tolerance_below",
+            "-0.1",
         ),
         (
             body(&torus, &good_request),
