@@ -32,6 +32,11 @@ use nalgebra::DVector;
 pub const MAX_CONE_CUTS: usize = 6;
 /// Proximal solves per QP at most.
 const MAX_PROXIMAL_SOLVES: usize = 12;
+/// Largest proximal weight tried: the step it allows is about
+/// `1e-12` of the unconstrained one, already nothing; beyond it the weight
+/// would overflow (a trust radius near 0 asks for an infinite weight) and
+/// scale the caps to 0.
+const MAX_PROXIMAL_WEIGHT: f64 = 1e12;
 
 /// One solve of the active-set path at a proximal weight.
 struct Proximal {
@@ -146,7 +151,7 @@ impl Qp {
             return solve_at(0.0, &warm);
         };
         let step = |p: &Proximal| (&p.sol.x - zk).norm();
-        let mut last = solve_at(mu_hint.max(0.0), &warm)?;
+        let mut last = solve_at(bounded_weight(mu_hint), &warm)?;
         // (μ, step) of the largest μ whose step is too long, and of the
         // smallest whose step is too short.
         let mut lo: Option<(f64, f64)> = None;
@@ -160,7 +165,15 @@ impl Qp {
             } else {
                 hi = Some((last.mu, d));
             }
+            if last.mu >= MAX_PROXIMAL_WEIGHT {
+                return Ok(last);
+            }
             let mu = next_mu(lo, hi, *radius);
+            let mu = if mu.is_nan() {
+                MAX_PROXIMAL_WEIGHT
+            } else {
+                mu.clamp(0.0, MAX_PROXIMAL_WEIGHT)
+            };
             last = solve_at(mu, &last.sol.warm_start())?;
         }
         Ok(last)
@@ -234,6 +247,16 @@ impl Qp {
     }
 }
 
+/// A proximal weight in `[0, MAX_PROXIMAL_WEIGHT]` (NaN, the model's
+/// answer to a trust radius of 0, counts as the largest).
+fn bounded_weight(mu: f64) -> f64 {
+    if mu.is_nan() {
+        MAX_PROXIMAL_WEIGHT
+    } else {
+        mu.clamp(0.0, MAX_PROXIMAL_WEIGHT)
+    }
+}
+
 /// The caps' scale with proximal weight `mu`: `|z - c|² + μ|z - z_k|² + Σρ s`
 /// is `2 (1 + μ)` times `½|z - c_μ|² + Σ ρ / (2 (1 + μ)) s`.
 fn cap_scale(mu: f64) -> f64 {
@@ -285,5 +308,26 @@ fn active_set_failure(f: das::Failure) -> QpFailure {
         das::Failure::Infeasible { .. } => QpFailure::Infeasible,
         das::Failure::MaxSteps => QpFailure::Numerical("active set: step limit reached".into()),
         das::Failure::BadInput(what) => QpFailure::Numerical(format!("active set: {what}")),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_proximal_weight_never_scales_the_caps_to_zero() {
+        // A trust radius of almost nothing asks the model for an overflowing
+        // weight; bounded, the caps keep a positive scale.
+        for radius in [1e-300, f64::MIN_POSITIVE, 0.0] {
+            let asked = next_mu(Some((1e300, 1.0)), None, radius);
+            let mu = bounded_weight(asked);
+            assert!((0.0..=MAX_PROXIMAL_WEIGHT).contains(&mu), "{asked} -> {mu}");
+            assert!(cap_scale(mu) > 0.0 && cap_scale(mu).is_finite());
+        }
+        assert_eq!(bounded_weight(f64::NAN), MAX_PROXIMAL_WEIGHT);
+        assert_eq!(bounded_weight(-1.0), 0.0);
+        assert_eq!(bounded_weight(3.0), 3.0);
+        assert_eq!(cap_scale(f64::INFINITY), 0.0, "what the bound prevents");
     }
 }

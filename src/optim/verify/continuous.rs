@@ -323,6 +323,17 @@ impl Problem {
         let displacement =
             self.displacement(a, b, |d| !ends_ok || interval_bound(a, b, d) >= required);
         let bound = interval_bound(a, b, displacement);
+        if !ends_ok {
+            // A sample below the clearance: the dense check flags its own
+            // samples; a bisection midpoint is flagged here, or the
+            // optimiser would never see where the trajectory dips.
+            out.flagged.extend(
+                [a, b]
+                    .iter()
+                    .filter(|s| s.clearance < required)
+                    .map(|s| s.z),
+            );
+        }
         if bound >= required || !ends_ok {
             out.accept(bound, displacement);
             return;
