@@ -36,7 +36,7 @@ mod subproblem;
 pub mod working_set;
 
 use crate::optim::problem::Problem;
-pub(in crate::optim) use crate::optim::scp::state::Scp;
+pub(in crate::optim) use crate::optim::scp::state::{Progress, Scp};
 pub use crate::optim::solution::{Solution, SolveControl, SolveStats};
 use crate::Result;
 use nalgebra::DVector;

@@ -52,6 +52,66 @@ struct Step {
     model_here: f64,
 }
 
+/// Where the run stands between two iterations: what
+/// [`Scp::finish_or_certify`] and [`Scp::stall`] decide on.
+#[derive(Clone, Debug)]
+enum Phase {
+    /// The run starts at its centre, which is feasible: its own answer
+    /// (0 QPs, cost 0) once dense verification passes.
+    Centre,
+    /// Steps towards the centre on the active-set method.
+    Descend,
+    /// The last active-set step was tiny, or the trust radius collapsed: a
+    /// feasible iterate goes to certification, an infeasible one stalled.
+    Converged,
+    /// The next QP is Clarabel's certifying one.
+    Certify,
+    /// Clarabel certified the current iterate: dense verification next.
+    Certified(FinalQp),
+}
+
+impl Phase {
+    /// Whether the last step ended the search at the current iterate.
+    fn converged(&self) -> bool {
+        matches!(self, Phase::Centre | Phase::Converged | Phase::Certified(_))
+    }
+
+    /// The phase a new iteration starts in: a candidate that neither
+    /// finished nor stalled is searched on (a certified iterate that is
+    /// not feasible is certified again).
+    fn next_iteration(self) -> Phase {
+        match self {
+            Phase::Certify | Phase::Certified(_) => Phase::Certify,
+            Phase::Centre | Phase::Descend | Phase::Converged => Phase::Descend,
+        }
+    }
+}
+
+/// Which violated clearance rows join an iteration's QP.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Generation {
+    /// Rows near the target, for a bounded number of rounds.
+    Thinned,
+    /// Every violated row (after a stall, and when certifying).
+    Exact,
+}
+
+/// What a step of the loop decided.
+enum Flow {
+    /// Go on to the next step.
+    Continue,
+    /// The run's answer.
+    Done(Box<Solution>),
+}
+
+/// What [`Scp::advance`] returns.
+pub(in crate::optim) enum Progress {
+    /// The run took the iterations it was given and can go on.
+    Paused,
+    /// The run ended with this answer.
+    Done(Box<Solution>),
+}
+
 /// The state of one SCP run (see the module docs).
 pub(in crate::optim) struct Scp<'a> {
     problem: &'a Problem,
@@ -67,22 +127,11 @@ pub(in crate::optim) struct Scp<'a> {
     radius: f64,
     eval: GridEval,
     hint: ActiveRows,
-    /// Every violated clearance row joins the QP (after a stall).
-    exact: bool,
-    /// The next QP is Clarabel's certifying one.
-    certify: bool,
-    /// The last accepted step was tiny (or the radius collapsed).
-    converged: bool,
-    /// Clarabel certified the current iterate.
-    certified: Option<FinalQp>,
-    /// Clarabel's account of the last QP it solved.
-    last_clarabel: Option<ClarabelInfo>,
+    phase: Phase,
+    generation: Generation,
     /// The trust ball's multiplier in the last active-set QP.
     proximal_weight: f64,
 }
-
-/// What a step of the loop decided: go on, or the run's answer.
-type Flow = Option<Solution>;
 
 impl<'a> Scp<'a> {
     pub(in crate::optim) fn new(
@@ -98,6 +147,11 @@ impl<'a> Scp<'a> {
         let eval = timed(&mut stats.evaluation_ms, || {
             problem.evaluate_grid(&rows, start.clone(), centre, ctl)
         });
+        let phase = if start == centre && eval.feasible() {
+            Phase::Centre
+        } else {
+            Phase::Descend
+        };
         Scp {
             problem,
             centre,
@@ -110,13 +164,9 @@ impl<'a> Scp<'a> {
             radius: problem.options.trust_region,
             eval,
             hint: ActiveRows::default(),
-            exact: false,
-            certify: false,
-            // A feasible centre is its own answer (0 QPs, cost 0); a
-            // feasible start elsewhere still has to move towards the centre.
-            converged: start == centre,
-            certified: (start == centre).then(FinalQp::not_needed),
-            last_clarabel: None,
+            // A feasible start elsewhere still has to move towards the centre.
+            phase,
+            generation: Generation::Thinned,
             proximal_weight: 0.0,
         }
     }
@@ -124,40 +174,37 @@ impl<'a> Scp<'a> {
     /// Iterate until a step returns the answer.
     pub(in crate::optim) fn run(mut self) -> Result<Solution> {
         loop {
-            if let Some(done) = self.advance(usize::MAX) {
-                return Ok(done);
+            if let Progress::Done(done) = self.advance(usize::MAX) {
+                return Ok(*done);
             }
         }
     }
 
-    /// Iterate until a step returns the answer (`Some`), or pause (`None`)
-    /// once the run has taken `iterations` QP iterations in all; a paused
+    /// Iterate until a step returns the answer, or pause once the run has taken `iterations` QP iterations in all; a paused
     /// run goes on where it stopped at the next call. The pause falls
     /// between two iterations, after a converged iterate was verified, so
     /// that pausing never changes the run: the same iterations in the same
     /// order, however they are split between calls.
-    pub(in crate::optim) fn advance(&mut self, iterations: usize) -> Flow {
+    pub(in crate::optim) fn advance(&mut self, iterations: usize) -> Progress {
         loop {
-            if let Some(done) = self.finish_or_certify() {
-                return Some(done);
+            if let Flow::Done(done) = self.finish_or_certify() {
+                return Progress::Done(done);
             }
             if self.stats.iterations >= iterations {
-                return None;
+                return Progress::Paused;
             }
-            // `converged` describes the step about to be taken, not the
-            // last one (a run starting at its centre begins converged).
-            self.converged = false;
-            if let Some(done) = self.out_of_budget() {
-                return Some(done);
+            self.phase = std::mem::replace(&mut self.phase, Phase::Descend).next_iteration();
+            if let Flow::Done(done) = self.out_of_budget() {
+                return Progress::Done(done);
             }
             let step = match self.generate_and_solve() {
                 Ok(step) => step,
-                Err(done) => return Some(*done),
+                Err(done) => return Progress::Done(done),
             };
             self.stats.iterations += 1;
             self.judge(step);
-            if let Some(done) = self.stall() {
-                return Some(done);
+            if let Flow::Done(done) = self.stall() {
+                return Progress::Done(done);
             }
         }
     }
@@ -177,14 +224,17 @@ impl<'a> Scp<'a> {
     /// verified densely; `optimal` when verification passes, otherwise the
     /// flagged phases join the optimisation set.
     fn finish_or_certify(&mut self) -> Flow {
-        if !(self.converged && self.eval.feasible()) {
-            return None;
+        if !(self.phase.converged() && self.eval.feasible()) {
+            return Flow::Continue;
         }
-        let Some(final_qp) = self.certified.clone() else {
-            self.converged = false;
-            self.certify = true;
-            self.radius = self.radius.max(self.problem.options.trust_region);
-            return None;
+        let (final_qp, unverified) = match &self.phase {
+            Phase::Centre => (FinalQp::not_needed(), Phase::Descend),
+            Phase::Certified(final_qp) => (final_qp.clone(), Phase::Certify),
+            _ => {
+                self.phase = Phase::Certify;
+                self.radius = self.radius.max(self.problem.options.trust_region);
+                return Flow::Continue;
+            }
         };
         let p = self.problem;
         let ctl = self.ctl;
@@ -192,38 +242,37 @@ impl<'a> Scp<'a> {
             p.verify(&self.eval.w, ctl)
         });
         if let Some(why) = v.interrupted {
-            return Some(self.stopped_early(why, Some(v)));
+            return self.stopped_early(why, Some(v));
         }
         if v.flagged.is_empty() && p.is_feasible(&v.report) {
             self.stats.final_penalty = self.rho;
-            let mut sol = self.answer(StopReason::Converged, Some(v), None, &[]);
+            let mut sol = self.solution(StopReason::Converged, Some(v), None, &[]);
             sol.report.final_qp = Some(final_qp);
-            return Some(sol);
+            return Flow::Done(Box::new(sol));
         }
         let added = p.add_flagged(self.rows.to_mut(), &v);
         self.stats.added_phases += added;
         if added == 0 {
             let reason = "dense verification failed on a constraint the optimiser cannot refine (goal or equality)";
-            return Some(self.answer(
+            return self.answer(
                 StopReason::VerificationFailed,
                 Some(v),
                 Some(reason.into()),
                 &[],
-            ));
+            );
         }
         let z = self.eval.z.clone();
         self.eval = timed(&mut self.stats.evaluation_ms, || {
             p.evaluate_grid(&self.rows, z, self.centre, ctl)
         });
-        self.converged = false;
-        self.certified = None;
-        None
+        self.phase = unverified;
+        Flow::Continue
     }
 
     /// Step 2: the caller's deadline / cancel flag and the iteration limit.
     fn out_of_budget(&mut self) -> Flow {
         if let Some(why) = self.ctl.stop_reason() {
-            return Some(self.stopped_early(why, None));
+            return self.stopped_early(why, None);
         }
         if self.stats.iterations >= self.max_iterations {
             let reason = format!(
@@ -231,9 +280,9 @@ impl<'a> Scp<'a> {
                 self.max_iterations,
                 self.problem.worst_constraint(&self.eval)
             );
-            return Some(self.answer(StopReason::IterationLimit, None, Some(reason), &[]));
+            return self.answer(StopReason::IterationLimit, None, Some(reason), &[]);
         }
-        None
+        Flow::Continue
     }
 
     /// Step 3: the QP at the iterate, by constraint generation. A failure
@@ -249,7 +298,7 @@ impl<'a> Scp<'a> {
             }
             Err(QpFailure::Infeasible) => {
                 let reason = "joint position limits (minus the margin), velocity limits and the start / final configuration cannot all hold".to_string();
-                Err(Box::new(self.answer(
+                Err(Box::new(self.solution(
                     StopReason::LimitsIncompatible,
                     None,
                     Some(reason),
@@ -257,11 +306,17 @@ impl<'a> Scp<'a> {
                 )))
             }
             Err(QpFailure::OutOfTime) => {
-                Err(Box::new(self.stopped_early(Interruption::Deadline, None)))
+                let warnings = [format!("solver stopped early: {}", Interruption::Deadline)];
+                Err(Box::new(self.solution(
+                    Interruption::Deadline.stop_reason(),
+                    None,
+                    Some(warnings[0].clone()),
+                    &warnings,
+                )))
             }
             Err(QpFailure::Numerical(what)) => {
                 let reason = format!("QP solver failed ({what}); best iterate returned");
-                Err(Box::new(self.answer(
+                Err(Box::new(self.solution(
                     StopReason::QpNumericalFailure,
                     None,
                     Some(reason),
@@ -280,8 +335,8 @@ impl<'a> Scp<'a> {
         stats: &mut SolveStats,
     ) -> std::result::Result<(QpSolution, f64, ActiveRows), QpFailure> {
         let at = Linearisation {
-            exact: self.exact || self.certify,
-            certify: self.certify
+            exact: self.generation == Generation::Exact || self.certifying(),
+            certify: self.certifying()
                 || self.problem.options.inner_solver == crate::optim::task::InnerSolver::Clarabel,
             rows: &self.rows,
             eval: &self.eval,
@@ -314,9 +369,7 @@ impl<'a> Scp<'a> {
             ctl: self.ctl,
         };
         let full_step = (&step.sol.z - &self.eval.z).norm();
-        if step.sol.clarabel.is_some() {
-            self.last_clarabel = step.sol.clarabel.clone();
-        } else {
+        if step.sol.clarabel.is_none() {
             self.proximal_weight = step.sol.proximal_weight;
         }
         let mut stats = std::mem::take(&mut self.stats);
@@ -330,7 +383,7 @@ impl<'a> Scp<'a> {
         // step (the Maratos effect). Clarabel's certifying step is judged
         // as it is.
         let correction: Option<&Correction> =
-            (!self.certify && self.eval.linear_ok && step.sol.clarabel.is_none())
+            (!self.certifying() && self.eval.linear_ok && step.sol.clarabel.is_none())
                 .then_some(&correct);
         let (accepted, alpha) = self.problem.line_search(&trial, correction, &mut stats);
         self.stats = stats;
@@ -344,7 +397,7 @@ impl<'a> Scp<'a> {
             radius = self.radius,
             rho = self.rho,
             violation = self.eval.true_violation,
-            certify = self.certify,
+            certify = self.certifying(),
             accept = accepted.is_some(),
             "scp step"
         );
@@ -353,7 +406,7 @@ impl<'a> Scp<'a> {
                 let scale = 1.0 + merit_here.abs();
                 self.accept(next, predicted, actual, alpha, full_step, scale, &step.sol);
             }
-            None => self.shrink(full_step),
+            None => self.shrink(full_step, step.sol.clarabel.as_ref()),
         }
     }
 
@@ -377,6 +430,7 @@ impl<'a> Scp<'a> {
             || actual.abs() <= 1e-6 * scale
             || predicted <= OPTIMALITY_TOLERANCE * scale;
         let radius_before = self.radius;
+        let certifying = self.certifying();
         let ball_held = full_step >= BALL_ACTIVE_FRACTION * radius_before;
         // The active-set path holds the ball only approximately: a bound
         // ball shows as a positive proximal weight.
@@ -384,42 +438,51 @@ impl<'a> Scp<'a> {
         if alpha < 1.0 {
             self.radius = (0.25 * self.radius).min(0.5 * full_step);
         } else if self.eval.linear_ok
-            && ((actual >= 0.75 * predicted && reached_ball) || (self.certify && tiny && ball_held))
+            && ((actual >= 0.75 * predicted && reached_ball) || (certifying && tiny && ball_held))
         {
             self.radius = (self.radius * 2.0).min(MAX_TRUST_REGION);
         }
         self.eval = next;
-        self.certified = None;
-        if self.certify {
-            let free = alpha == 1.0 && (!ball_held || radius_before >= MAX_TRUST_REGION);
-            if tiny && free {
-                self.certified = sol.clarabel.as_ref().map(|info| FinalQp::from(info, false));
-            } else if tiny && alpha < 1.0 {
-                // Clarabel's step had to be cut back and the rest is tiny:
-                // the point stands, with the ball (the cut) holding it.
-                self.certified = Some(FinalQp::held_by_ball(sol.clarabel.as_ref()));
-            } else if !tiny {
-                self.certify = false;
+        self.phase = if !certifying {
+            if tiny {
+                Phase::Converged
+            } else {
+                Phase::Descend
             }
-        }
-        if tiny && (!self.certify || self.certified.is_some()) {
-            self.converged = true;
-        }
+        } else if !tiny {
+            Phase::Descend
+        } else if alpha < 1.0 {
+            // Clarabel's step had to be cut back and the rest is tiny:
+            // the point stands, with the ball (the cut) holding it.
+            Phase::Certified(FinalQp::held_by_ball(sol.clarabel.as_ref()))
+        } else {
+            let free = !ball_held || radius_before >= MAX_TRUST_REGION;
+            match (&sol.clarabel, free) {
+                (Some(info), true) => Phase::Certified(FinalQp::from(info, false)),
+                _ => Phase::Certify,
+            }
+        };
     }
 
     /// A rejected step: shrink the trust region; a collapsed radius counts
     /// as converged (a certifying QP that cannot move certifies the point
-    /// with the ball held).
-    fn shrink(&mut self, full_step: f64) {
+    /// with the ball held; `clarabel` is that QP's account).
+    fn shrink(&mut self, full_step: f64, clarabel: Option<&ClarabelInfo>) {
         self.stats.rejected_steps += 1;
         self.radius = (0.25 * self.radius).min(0.5 * full_step);
         if self.radius < MIN_TRUST_REGION {
-            self.converged = true;
             self.radius = self.problem.options.trust_region;
-            if self.certify && self.certified.is_none() {
-                self.certified = Some(FinalQp::held_by_ball(self.last_clarabel.as_ref()));
-            }
+            self.phase = if self.certifying() {
+                Phase::Certified(FinalQp::held_by_ball(clarabel))
+            } else {
+                Phase::Converged
+            };
         }
+    }
+
+    /// Whether the current iteration's QP is Clarabel's certifying one.
+    fn certifying(&self) -> bool {
+        matches!(self.phase, Phase::Certify)
     }
 
     /// Step 5: a stall short of feasibility changes the model (exact
@@ -428,27 +491,25 @@ impl<'a> Scp<'a> {
     /// run gives up. `infeasible` is kept for proofs (the diagnosis and a
     /// QP whose hard rows are incompatible): this is a local minimum.
     fn stall(&mut self) -> Flow {
-        if !(self.converged && !self.eval.feasible() && self.eval.linear_ok) {
-            return None;
+        if !(self.phase.converged() && !self.eval.feasible() && self.eval.linear_ok) {
+            return Flow::Continue;
         }
-        self.converged = false;
-        self.certify = false;
-        self.certified = None;
+        self.phase = Phase::Descend;
         self.radius = self.radius.max(self.problem.options.trust_region);
-        if !self.exact {
-            self.exact = true;
-            return None;
+        if self.generation == Generation::Thinned {
+            self.generation = Generation::Exact;
+            return Flow::Continue;
         }
         self.rho *= 10.0;
         if self.rho <= MAX_PENALTY {
-            return None;
+            return Flow::Continue;
         }
         self.stats.final_penalty = self.rho;
         let reason = format!(
             "no feasible solution found: {} could not be reduced further at the largest penalty (a local minimum of the violation; the problem may be infeasible)",
             self.problem.worst_constraint(&self.eval)
         );
-        Some(self.answer(StopReason::LocalMinimum, None, Some(reason), &[]))
+        self.answer(StopReason::LocalMinimum, None, Some(reason), &[])
     }
 
     /// Finish as `max_iterations` because the caller stopped the solver;
@@ -456,17 +517,33 @@ impl<'a> Scp<'a> {
     /// A dense verification interrupted by the stop is its report; without
     /// one, the answer's verification stops at once too, so a stopped run
     /// costs only the matrix products of the limit figures.
-    fn stopped_early(&mut self, why: Interruption, verification: Option<Verification>) -> Solution {
+    fn stopped_early(&mut self, why: Interruption, verification: Option<Verification>) -> Flow {
         let warn = format!("solver stopped early: {why}");
         let warnings = [warn.clone()];
         self.answer(why.stop_reason(), verification, Some(warn), &warnings)
     }
 
-    /// The run's answer at the current iterate.
+    /// The run ends with its answer at the current iterate.
     fn answer(
         &mut self,
         stop: StopReason,
-        verification: Option<crate::optim::verify::Verification>,
+        verification: Option<Verification>,
+        reason: Option<String>,
+        extra_warnings: &[String],
+    ) -> Flow {
+        Flow::Done(Box::new(self.solution(
+            stop,
+            verification,
+            reason,
+            extra_warnings,
+        )))
+    }
+
+    /// The run's answer at the current iterate.
+    fn solution(
+        &mut self,
+        stop: StopReason,
+        verification: Option<Verification>,
         reason: Option<String>,
         extra_warnings: &[String],
     ) -> Solution {

@@ -39,7 +39,7 @@
 
 use crate::optim::problem::Problem;
 use crate::optim::report::Status;
-use crate::optim::scp::Scp;
+use crate::optim::scp::{Progress, Scp};
 use crate::optim::solution::{Solution, SolveControl, SolveStats};
 use crate::Result;
 use nalgebra::DVector;
@@ -151,8 +151,8 @@ impl Problem {
             round += RACE_ROUND;
             let advance = |lane: &mut Lane| {
                 if let Lane::Running(scp) = lane {
-                    if let Some(done) = scp.advance(round) {
-                        *lane = Lane::Finished(Box::new(done));
+                    if let Progress::Done(done) = scp.advance(round) {
+                        *lane = Lane::Finished(done);
                     }
                 }
             };
@@ -356,8 +356,8 @@ mod tests {
         let mut scp = Scp::new(&p, &zero, &zero, 100, &ctl);
         let mut pauses = 0;
         let paused = loop {
-            if let Some(done) = scp.advance(scp.stats().iterations + 1) {
-                break done;
+            if let Progress::Done(done) = scp.advance(scp.stats().iterations + 1) {
+                break *done;
             }
             pauses += 1;
         };
