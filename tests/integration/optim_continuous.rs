@@ -215,6 +215,64 @@ fn an_obstacle_between_two_samples_is_caught() {
     }
 }
 
+/// With 40 verification samples and a 10 cm activation distance the
+/// pairs beyond the activation distance are certified by it, so the
+/// certificate bisects pair by pair: a ball that the arm passes through
+/// between two samples (clear at both) is flagged at a phase where it truly
+/// penetrates, so the optimiser can put a constraint there.
+#[test]
+fn a_dip_between_close_samples_is_flagged_pair_by_pair() {
+    let robot = Robot::panda().unwrap();
+    let (mut req, w) = swing_request(&robot);
+    req.task.promp.n_samples = 10;
+    req.task.options.activation_distance_m = Some(0.1);
+    let problem = req.validate(&robot).unwrap();
+    let nb = req.task.promp.n_basis;
+    let wm = DMatrix::from_fn(nb, 7, |i, j| w[j * nb + i]);
+    let duration = req.task.duration_s;
+    let warp = req.task.time_warp();
+    let at = |tau: f64| state(problem.basis(), &wm, warp.at(tau)[0], duration).0;
+    // The verification samples (time fractions).
+    let times = problem.basis().resampled(40).unwrap().phases().to_vec();
+    let ball = |p: Vector3<f64>| sphere("slipped", p.into(), 0.003);
+    let mut found = None;
+    'search: for k in (0..times.len() - 1).step_by(7) {
+        let (ta, tb) = (times[k], times[k + 1]);
+        let (qa, qb) = (at(ta), at(tb));
+        for p in robot_points(&robot, &at(0.5 * (ta + tb))) {
+            let scene = Scene::new(vec![ball(p)]).unwrap();
+            let clear = |q: &[f64]| scene.min_clearance(&robot, &robot.fk(q)).unwrap().distance;
+            if clear(&qa) > 0.001 && clear(&qb) > 0.001 {
+                found = Some(p);
+                break 'search;
+            }
+        }
+    }
+    let centre = found.expect("a vertex that passes through the ball between two samples");
+    req.task.obstacles = vec![ball(centre)];
+    let problem = req.validate(&robot).unwrap();
+    let scene = Scene::new(req.task.obstacles.clone()).unwrap();
+    let v = problem.verify(&DVector::from_column_slice(&w), &Default::default());
+    assert!(v.report.min_clearance_m.unwrap() >= 0.0, "{:?}", v.report);
+    assert!(
+        v.report.continuous_clearance_m.unwrap() < 0.0,
+        "{:?}",
+        v.report
+    );
+    let dips = v
+        .flagged
+        .iter()
+        .filter(|&&tau| {
+            scene
+                .min_clearance(&robot, &robot.fk(&at(tau)))
+                .unwrap()
+                .distance
+                < 0.0
+        })
+        .count();
+    assert!(dips > 0, "flagged {:?}", v.flagged);
+}
+
 /// Typical prior 5 without obstacles and with a 0.55 rad joint-limit
 /// margin rides a joint limit: sampled coarsely (10, 20 and 40 samples, 4
 /// dense per sample), the `optimal` answer stays within the limits at
@@ -322,6 +380,15 @@ fn the_pairwise_certificate_never_exceeds_the_oversampled_clearance() {
                 certified <= sampled + 1e-9,
                 "seed {seed} {what}: certificate {certified} above the sampled clearance {sampled}"
             );
+            // A trajectory that dips below the clearance between its
+            // samples is told where: some flagged phase for the optimiser.
+            let v = problem.verify(&DVector::from_column_slice(w), &Default::default());
+            if certified < req.task.clearance_m - 1e-6 {
+                assert!(
+                    !v.flagged.is_empty(),
+                    "seed {seed} {what}: certificate {certified} below the clearance, nothing flagged"
+                );
+            }
             if what == "answer" && resp.status == Status::Optimal {
                 answers_checked += 1;
                 // Not vacuous: within 2 mm of the truth on an answer that

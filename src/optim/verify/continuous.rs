@@ -437,6 +437,11 @@ impl Problem {
             })
             .collect();
         let required = self.clearance_m - FEASIBILITY_TOLERANCE;
+        if at_mid.iter().any(|&m| m < required) {
+            // The trajectory dips below the clearance between the samples:
+            // the optimiser must see this phase, as for a full midpoint.
+            out.flagged.push(z);
+        }
         let halves = [(a, &mid, true), (&mid, b, false)];
         for (lo, hi, first) in halves {
             let spans: Vec<OpenPair> = open
