@@ -250,7 +250,7 @@ impl<'a> Scp<'a> {
             sol.report.final_qp = Some(final_qp);
             return Flow::Done(Box::new(sol));
         }
-        let added = p.add_flagged(self.rows.to_mut(), &v);
+        let added = self.add_flagged(&v);
         self.stats.added_phases += added;
         if added == 0 {
             let reason = "dense verification failed on a constraint the optimiser cannot refine (goal or equality)";
@@ -385,7 +385,7 @@ impl<'a> Scp<'a> {
         let correction: Option<&Correction> =
             (!self.certifying() && self.eval.linear_ok && step.sol.clarabel.is_none())
                 .then_some(&correct);
-        let (accepted, alpha) = self.problem.line_search(&trial, correction, &mut stats);
+        let (accepted, alpha) = self.line_search(&trial, correction, &mut stats);
         self.stats = stats;
         tracing::debug!(
             iteration = self.stats.iterations,
@@ -512,82 +512,6 @@ impl<'a> Scp<'a> {
         self.answer(StopReason::LocalMinimum, None, Some(reason), &[])
     }
 
-    /// Finish as `max_iterations` because the caller stopped the solver;
-    /// the reason is also a warning.
-    /// A dense verification interrupted by the stop is its report; without
-    /// one, the answer's verification stops at once too, so a stopped run
-    /// costs only the matrix products of the limit figures.
-    fn stopped_early(&mut self, why: Interruption, verification: Option<Verification>) -> Flow {
-        let warn = format!("solver stopped early: {why}");
-        let warnings = [warn.clone()];
-        self.answer(why.stop_reason(), verification, Some(warn), &warnings)
-    }
-
-    /// The run ends with its answer at the current iterate.
-    fn answer(
-        &mut self,
-        stop: StopReason,
-        verification: Option<Verification>,
-        reason: Option<String>,
-        extra_warnings: &[String],
-    ) -> Flow {
-        Flow::Done(Box::new(self.solution(
-            stop,
-            verification,
-            reason,
-            extra_warnings,
-        )))
-    }
-
-    /// The run's answer at the current iterate.
-    fn solution(
-        &mut self,
-        stop: StopReason,
-        verification: Option<Verification>,
-        reason: Option<String>,
-        extra_warnings: &[String],
-    ) -> Solution {
-        self.problem.finish(
-            stop,
-            &self.eval,
-            verification,
-            reason,
-            std::mem::take(&mut self.stats),
-            self.started,
-            extra_warnings,
-            self.ctl,
-        )
-    }
-}
-
-/// Most phases added per dense verification round.
-const MAX_ADDED_PER_ROUND: usize = 64;
-
-/// Halvings of a rejected QP step tried before the trust region shrinks
-/// (2 cut the SCP iterations on the typical benchmark by 17 % with the
-/// same statuses; more traded statuses for iterations).
-const LINE_SEARCH_HALVINGS: usize = 2;
-
-/// A second-order correction: the corrected step's end (whitened) for a
-/// rejected trial point, from the QP with that point's short pairs added.
-type Correction<'c> = dyn Fn(&GridEval, &mut SolveStats) -> Option<DVector<f64>> + 'c;
-
-/// One QP step to judge: from `eval` towards `target` (whitened).
-struct StepTrial<'a> {
-    eval: &'a GridEval,
-    /// `eval`'s merit at penalty `rho`.
-    merit: f64,
-    target: &'a DVector<f64>,
-    rows: &'a PhaseRows,
-    centre: &'a DVector<f64>,
-    rho: f64,
-    /// The model's predicted merit decrease for the whole step.
-    predicted: f64,
-    /// The caller's stop: an interrupted trial is never accepted.
-    ctl: &'a SolveControl,
-}
-
-impl Problem {
     /// The step of an SCP iteration, judged on the true merit: the QP's
     /// solution if it achieves at least 10 % of the predicted decrease;
     /// else, with a `correction`, the second-order corrected point judged
@@ -630,7 +554,7 @@ impl Problem {
                 &eval.z + (target - &eval.z) * alpha
             };
             let next = timed(&mut stats.evaluation_ms, || {
-                self.evaluate_grid(rows, z, centre, ctl)
+                self.problem.evaluate_grid(rows, z, centre, ctl)
             });
             if next.interrupted {
                 return (None, alpha);
@@ -648,7 +572,7 @@ impl Problem {
             };
             stats.corrections.0 += 1;
             let corrected = timed(&mut stats.evaluation_ms, || {
-                self.evaluate_grid(rows, z, centre, ctl)
+                self.problem.evaluate_grid(rows, z, centre, ctl)
             });
             if corrected.interrupted {
                 return (None, alpha);
@@ -662,32 +586,61 @@ impl Problem {
         (None, alpha)
     }
 
-    /// Add (a spread-out subset of) the phases dense verification flagged.
-    fn add_flagged(&self, rows: &mut PhaseRows, v: &Verification) -> usize {
+    /// Add (a spread-out subset of) the phases dense verification flagged
+    /// to the optimisation phases; returns how many were new.
+    fn add_flagged(&mut self, v: &Verification) -> usize {
+        let p = self.problem;
+        let rows = self.rows.to_mut();
         let before = rows.len();
         let stride = v.flagged.len().div_ceil(MAX_ADDED_PER_ROUND).max(1);
-        for &p in v.flagged.iter().step_by(stride) {
-            rows.push(&self.basis, &self.whitening, p);
+        for &phase in v.flagged.iter().step_by(stride) {
+            rows.push(&p.basis, &p.whitening, phase);
         }
         rows.len() - before
     }
 
-    #[allow(clippy::too_many_arguments)]
-    fn finish(
-        &self,
+    /// Finish as `max_iterations` because the caller stopped the solver;
+    /// the reason is also a warning.
+    /// A dense verification interrupted by the stop is its report; without
+    /// one, the answer's verification stops at once too, so a stopped run
+    /// costs only the matrix products of the limit figures.
+    fn stopped_early(&mut self, why: Interruption, verification: Option<Verification>) -> Flow {
+        let warn = format!("solver stopped early: {why}");
+        let warnings = [warn.clone()];
+        self.answer(why.stop_reason(), verification, Some(warn), &warnings)
+    }
+
+    /// The run ends with its answer at the current iterate.
+    fn answer(
+        &mut self,
         stop: StopReason,
-        eval: &GridEval,
         verification: Option<Verification>,
         reason: Option<String>,
-        stats: SolveStats,
-        started: Instant,
         extra_warnings: &[String],
-        ctl: &SolveControl,
+    ) -> Flow {
+        Flow::Done(Box::new(self.solution(
+            stop,
+            verification,
+            reason,
+            extra_warnings,
+        )))
+    }
+
+    /// The run's answer at the current iterate: its dense verification
+    /// (`verification`, or one made now), the work done and the warnings.
+    fn solution(
+        &mut self,
+        stop: StopReason,
+        verification: Option<Verification>,
+        reason: Option<String>,
+        extra_warnings: &[String],
     ) -> Solution {
-        let v = verification.unwrap_or_else(|| self.verify(&eval.w, ctl));
+        let p = self.problem;
+        let stats = std::mem::take(&mut self.stats);
+        let v = verification.unwrap_or_else(|| p.verify(&self.eval.w, self.ctl));
         let mut report = v.report;
         report.iterations = stats.iterations;
-        report.warnings = self.warnings.clone();
+        report.warnings = p.warnings.clone();
         report.warnings.extend(extra_warnings.iter().cloned());
         if stats.added_phases > 0 {
             report.warnings.push(format!(
@@ -695,15 +648,42 @@ impl Problem {
                 stats.added_phases
             ));
         }
-        report.solve_ms = started.elapsed().as_secs_f64() * 1e3;
+        report.solve_ms = self.started.elapsed().as_secs_f64() * 1e3;
         Solution {
             status: stop.status(),
             stop_reason: stop,
-            weights: eval.w.as_slice().to_vec(),
-            mahalanobis: self.whitening.mahalanobis(&eval.w),
+            weights: self.eval.w.as_slice().to_vec(),
+            mahalanobis: p.whitening.mahalanobis(&self.eval.w),
             report,
             reason,
             stats,
         }
     }
+}
+
+/// Most phases added per dense verification round.
+const MAX_ADDED_PER_ROUND: usize = 64;
+
+/// Halvings of a rejected QP step tried before the trust region shrinks
+/// (2 cut the SCP iterations on the typical benchmark by 17 % with the
+/// same statuses; more traded statuses for iterations).
+const LINE_SEARCH_HALVINGS: usize = 2;
+
+/// A second-order correction: the corrected step's end (whitened) for a
+/// rejected trial point, from the QP with that point's short pairs added.
+type Correction<'c> = dyn Fn(&GridEval, &mut SolveStats) -> Option<DVector<f64>> + 'c;
+
+/// One QP step to judge: from `eval` towards `target` (whitened).
+struct StepTrial<'a> {
+    eval: &'a GridEval,
+    /// `eval`'s merit at penalty `rho`.
+    merit: f64,
+    target: &'a DVector<f64>,
+    rows: &'a PhaseRows,
+    centre: &'a DVector<f64>,
+    rho: f64,
+    /// The model's predicted merit decrease for the whole step.
+    predicted: f64,
+    /// The caller's stop: an interrupted trial is never accepted.
+    ctl: &'a SolveControl,
 }
