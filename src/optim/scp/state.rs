@@ -1,8 +1,10 @@
 //! The SCP driver's state and its named steps.
 //!
 //! [`Scp`] holds everything that changes between iterations (the iterate,
-//! trust radius, penalty, working-set hint, phase set, counters) and each
-//! decision of the loop is one method:
+//! trust radius, penalty, working-set hint, phase set, counters, and where
+//! the run stands: a `Phase` — descending, converged, certifying,
+//! certified — and a `Generation`, thinned or exact) and each decision of
+//! the loop is one method returning a `Flow` (continue, or the answer):
 //!
 //! 1. [`Scp::finish_or_certify`] — a converged feasible iterate is
 //!    *certified* first (the next QP is Clarabel's: see below), then
