@@ -43,8 +43,9 @@
 //! answer; that bisection was half of a dense verification.) Pairs outside
 //! the activation distance at both ends are bounded by
 //! `activation − D / 2`; where that is not enough, the interval is bisected
-//! with full samples as before. An interval that still falls short is
-//! reported by its midpoint phase, which the optimiser adds to its grid.
+//! with full samples as before. An interval that still falls short, or
+//! where a midpoint falls below the clearance, is reported by its midpoint
+//! and its two ends, which the optimiser adds to its grid.
 //!
 //! The intervals are certified in parallel when the solve may use the
 //! cores ([`SolveControl::parallel`]); the result is merged in their order,
@@ -236,6 +237,15 @@ impl Certificate {
         self.margin_m = self.margin_m.max(0.5 * displacement);
     }
 
+    /// Flag the interval `[a, b]`: its midpoint (where the bound is
+    /// weakest, or the trajectory dips) and both ends. A constraint at the
+    /// midpoint alone lets the optimiser push the dip to either side of it
+    /// (a new flag, round after round); with the ends the dip is held on
+    /// both sides (docs/experiments.md).
+    fn flag_interval(&mut self, a: f64, b: f64) {
+        self.flagged.extend([0.5 * (a + b), a, b]);
+    }
+
     /// Append `later`, the certificate of the intervals after this one's.
     fn merge(mut self, later: Certificate) -> Certificate {
         self.accept(later.clearance_m, 2.0 * later.margin_m);
@@ -340,7 +350,7 @@ impl Problem {
         }
         if depth == MAX_BISECTIONS {
             out.accept(bound, displacement);
-            out.flagged.push(0.5 * (a.z + b.z));
+            out.flag_interval(a.z, b.z);
             return;
         }
         let beyond = pair_bound(self.activation_m, self.activation_m, displacement);
@@ -419,7 +429,7 @@ impl Problem {
         }
         let z = 0.5 * (a.z + b.z);
         if depth == MAX_BISECTIONS {
-            out.flagged.push(z);
+            out.flag_interval(a.z, b.z);
             return;
         }
         let mid = self.bare_sample_at(wm, z);
@@ -440,7 +450,7 @@ impl Problem {
         if at_mid.iter().any(|&m| m < required) {
             // The trajectory dips below the clearance between the samples:
             // the optimiser must see this phase, as for a full midpoint.
-            out.flagged.push(z);
+            out.flag_interval(a.z, b.z);
         }
         let halves = [(a, &mid, true), (&mid, b, false)];
         for (lo, hi, first) in halves {

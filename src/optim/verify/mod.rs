@@ -28,7 +28,7 @@ pub struct Verification {
     pub report: TrajectoryReport,
     /// Phases with a violated limit, velocity or clearance: dense samples,
     /// joint peaks between them, and the certificate's uncertified
-    /// intervals (sorted).
+    /// intervals (sorted, each once).
     pub flagged: Vec<f64>,
     /// Why the clearance part was not finished (the caller's deadline or
     /// cancel flag): the report then has no clearance figures, a warning
@@ -137,6 +137,7 @@ impl Problem {
             flagged.extend(c.flagged);
         }
         flagged.sort_by(f64::total_cmp);
+        flagged.dedup();
         if let Some(why) = interrupted {
             report.min_clearance_m = None;
             report.closest = None;
