@@ -32,6 +32,7 @@ mod optim_determinism;
 mod optim_dual_active_set;
 mod optim_exactness;
 mod optim_franka;
+mod optim_global;
 mod optim_properties;
 mod optim_requests;
 mod optim_smooth_prior;

@@ -43,12 +43,14 @@ use nalgebra::DVector;
 
 impl Problem {
     /// SCP towards the prior mean (the Mahalanobis-closest feasible weights).
-    /// When that run ends without a feasible answer, it is restarted from
-    /// detours around the blocking obstacles and seeded prior draws (see
+    /// When the mean is blocked and both ends are configurations, a run
+    /// from a collision-free path races it from the start (see
+    /// [`global`](crate::optim::seeds::global)); when that first stage ends
+    /// without a feasible answer, it is restarted from detours around the
+    /// blocking obstacles and seeded prior draws (see
     /// [`restart`](crate::optim::seeds::restart)).
     pub fn solve(&self, ctl: &SolveControl) -> Result<Solution> {
-        let zero = DVector::zeros(self.whitening.dim());
-        let first = self.run(&zero, &zero, self.options.max_iterations, ctl)?;
+        let first = self.first_run(ctl)?;
         self.restart_if_stuck(first, ctl)
     }
 

@@ -129,7 +129,7 @@ impl Problem {
     /// runs have finished after a round depends only on their iteration
     /// counts and states, so the outcome is the same whatever the thread
     /// count.
-    fn race(
+    pub(super) fn race(
         &self,
         starts: &[DVector<f64>],
         centre: &DVector<f64>,
@@ -137,54 +137,64 @@ impl Problem {
         ctl: &SolveControl,
     ) -> Race {
         let lane = |start| Lane::Running(Box::new(Scp::new(self, start, centre, cap, ctl)));
-        let mut lanes: Vec<Lane> = if ctl.parallel() {
+        let lanes: Vec<Lane> = if ctl.parallel() {
             starts.par_iter().map(lane).collect()
         } else {
             starts.iter().map(lane).collect()
         };
-        let mut round = 0;
-        while lanes.iter().any(|l| matches!(l, Lane::Running(_)))
-            && !lanes
-                .iter()
-                .any(|l| matches!(l, Lane::Finished(s) if s.status == Status::Optimal))
-        {
-            round += RACE_ROUND;
-            let advance = |lane: &mut Lane| {
-                if let Lane::Running(scp) = lane {
-                    if let Progress::Done(done) = scp.advance(round) {
-                        *lane = Lane::Finished(done);
-                    }
-                }
-            };
-            if ctl.parallel() {
-                lanes.par_iter_mut().for_each(advance);
-            } else {
-                lanes.iter_mut().for_each(advance);
-            }
-            if round >= HOPELESS_FROM {
-                stop_hopeless(&mut lanes);
-            }
-        }
-        let mut race = Race {
-            finished: Vec::with_capacity(lanes.len()),
-            unfinished: Vec::new(),
-        };
-        for lane in lanes {
-            match lane {
-                Lane::Running(scp) => {
-                    race.unfinished.push(scp.stats().clone());
-                    race.finished.push(None);
-                }
-                Lane::Finished(sol) => race.finished.push(Some(*sol)),
-                Lane::Stopped(stats) => {
-                    race.unfinished.push(stats);
-                    race.finished.push(None);
-                }
-            }
-        }
-        race
+        race_lanes(lanes, ctl)
     }
+}
 
+/// [`Problem::race`] of lanes already started (some may have run ahead or
+/// finished): advanced together in rounds until the end of the first round
+/// in which one is `optimal`, or until every lane has ended or been
+/// stopped as hopeless.
+pub(super) fn race_lanes(mut lanes: Vec<Lane>, ctl: &SolveControl) -> Race {
+    let mut round = 0;
+    while lanes.iter().any(|l| matches!(l, Lane::Running(_)))
+        && !lanes
+            .iter()
+            .any(|l| matches!(l, Lane::Finished(s) if s.status == Status::Optimal))
+    {
+        round += RACE_ROUND;
+        let advance = |lane: &mut Lane| {
+            if let Lane::Running(scp) = lane {
+                if let Progress::Done(done) = scp.advance(round) {
+                    *lane = Lane::Finished(done);
+                }
+            }
+        };
+        if ctl.parallel() {
+            lanes.par_iter_mut().for_each(advance);
+        } else {
+            lanes.iter_mut().for_each(advance);
+        }
+        if round >= HOPELESS_FROM {
+            stop_hopeless(&mut lanes);
+        }
+    }
+    let mut race = Race {
+        finished: Vec::with_capacity(lanes.len()),
+        unfinished: Vec::new(),
+    };
+    for lane in lanes {
+        match lane {
+            Lane::Running(scp) => {
+                race.unfinished.push(scp.stats().clone());
+                race.finished.push(None);
+            }
+            Lane::Finished(sol) => race.finished.push(Some(*sol)),
+            Lane::Stopped(stats) => {
+                race.unfinished.push(stats);
+                race.finished.push(None);
+            }
+        }
+    }
+    race
+}
+
+impl Problem {
     /// The `n` restart starts: the detours around the obstacles that block
     /// the prior mean ([`Problem::detour_starts`]), then draws to make up
     /// the number.
@@ -212,7 +222,7 @@ impl Problem {
 const RACE_ROUND: usize = 5;
 
 /// One restart in [`Problem::race`].
-enum Lane<'a> {
+pub(super) enum Lane<'a> {
     Running(Box<Scp<'a>>),
     Finished(Box<Solution>),
     /// Stopped as hopeless ([`stop_hopeless`]), with its counters.
@@ -253,36 +263,36 @@ fn stop_hopeless(lanes: &mut [Lane]) {
 }
 
 /// What [`Problem::race`] ended with.
-struct Race {
+pub(super) struct Race {
     /// Each run's answer by start index; `None` for a run stopped when
     /// another ended `optimal`.
-    finished: Vec<Option<Solution>>,
+    pub(super) finished: Vec<Option<Solution>>,
     /// The counters of the stopped runs.
-    unfinished: Vec<SolveStats>,
+    pub(super) unfinished: Vec<SolveStats>,
 }
 
 /// Counters of every run of one solve, and its wall time (the restarts
 /// overlap, so their times do not add up).
-struct Spent {
+pub(super) struct Spent {
     stats: SolveStats,
-    solve_ms: f64,
+    pub(super) solve_ms: f64,
 }
 
 impl Spent {
-    fn from(first: &Solution) -> Spent {
+    pub(super) fn from(first: &Solution) -> Spent {
         Spent {
             stats: first.stats.clone(),
             solve_ms: first.report.solve_ms,
         }
     }
 
-    fn add(&mut self, restart: &SolveStats) {
+    pub(super) fn add(&mut self, restart: &SolveStats) {
         self.stats.absorb(restart);
         self.stats.restarts += 1;
     }
 
     /// `sol` reporting the work of every run, with `note` as a warning.
-    fn onto(self, mut sol: Solution, note: String) -> Solution {
+    pub(super) fn onto(self, mut sol: Solution, note: String) -> Solution {
         sol.report.iterations = self.stats.iterations;
         sol.report.solve_ms = self.solve_ms;
         sol.report.warnings.push(note);
