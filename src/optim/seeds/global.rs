@@ -58,10 +58,10 @@ impl Problem {
             progress
         };
         let (progress, path) = if ctl.parallel() {
-            rayon::join(head_start, || self.path_start(ctl, &mean_ended))
+            rayon::join(head_start, || self.path_start(ctl, &mean_ended, 0))
         } else {
             let progress = head_start();
-            (progress, self.path_start(ctl, &mean_ended))
+            (progress, self.path_start(ctl, &mean_ended, 0))
         };
         let mean_lane = match progress {
             // Optimal, a proof of infeasibility or a stop: nothing to race.
@@ -88,7 +88,7 @@ impl Problem {
     /// Whether both ends are configurations and the prior mean's
     /// trajectory collides with an obstacle (signed distance below zero)
     /// at an optimisation phase.
-    fn mean_collides(&self, zero: &DVector<f64>, ctl: &SolveControl) -> bool {
+    pub(super) fn mean_collides(&self, zero: &DVector<f64>, ctl: &SolveControl) -> bool {
         if self.linear.start.is_none() || self.linear.final_configuration.is_none() {
             return false;
         }

@@ -56,6 +56,8 @@ const FIT_RIDGE: f64 = 1e-3;
 /// Mixed into `options.seed` so the planner's samples are not the
 /// restarts' draws.
 const PATH_STREAM: u64 = 0x9a75_5eed;
+/// Mixed into the planner's seed once per attempt.
+const ATTEMPT_STRIDE: u64 = 0x5851_f42d_4c95_7f2d;
 
 /// A tree of configurations, each with its parent's index.
 struct Tree {
@@ -123,17 +125,22 @@ impl Problem {
     /// budget and `ctl` (see the module docs).
     /// `abandon` stops the search like `ctl` does (the run it would race
     /// has already ended).
+    /// `attempt` picks the planner's random stream (0 for the global
+    /// stage, 1 for the restarts).
     pub(in crate::optim) fn path_start(
         &self,
         ctl: &SolveControl,
         abandon: &AtomicBool,
+        attempt: u64,
     ) -> Option<DVector<f64>> {
         let start = self.linear.start.clone()?;
         let goal = self.linear.final_configuration.clone()?;
         let planner = Planner {
             problem: self,
             ends: [start.clone(), goal.clone()],
-            rng: ChaCha8Rng::seed_from_u64(self.options.seed ^ PATH_STREAM),
+            rng: ChaCha8Rng::seed_from_u64(
+                self.options.seed ^ PATH_STREAM ^ attempt.wrapping_mul(ATTEMPT_STRIDE),
+            ),
         };
         if !(planner.clear_by(&start, self.clearance_m)
             && planner.clear_by(&goal, self.clearance_m))

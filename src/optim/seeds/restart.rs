@@ -8,7 +8,10 @@
 //! iteration limit). On the typical problems (`fixtures::typical`) most such
 //! problems are feasible: a run started elsewhere finds a feasible answer.
 //! So [`Problem::solve`] restarts `options.restarts` times, still
-//! minimising the distance to the prior mean: first from detours around the
+//! minimising the distance to the prior mean: first, when both ends are
+//! configurations and the mean collides, from a second collision-free path
+//! (the planner of [`super::path`] on another random stream than the global
+//! stage's), then from detours around the
 //! obstacles that block the mean (the prior conditioned to pass each on its
 //! near or far side, [`super::detour`]), then from draws `z ~ N(0, I)` of
 //! the whitened prior (seeded by `options.seed`) to make up the number.
@@ -195,11 +198,19 @@ pub(super) fn race_lanes(mut lanes: Vec<Lane>, ctl: &SolveControl) -> Race {
 }
 
 impl Problem {
-    /// The `n` restart starts: the detours around the obstacles that block
-    /// the prior mean ([`Problem::detour_starts`]), then draws to make up
-    /// the number.
+    /// The `n` restart starts: a second planned path's seed when the mean
+    /// collides and one is found ([`Problem::path_start`], attempt 1), the
+    /// detours around the obstacles that block the prior mean
+    /// ([`Problem::detour_starts`]), then draws to make up the number.
     fn restart_starts(&self, n: usize, ctl: &SolveControl) -> Vec<DVector<f64>> {
-        let mut starts = self.detour_starts(n, ctl);
+        let zero = DVector::zeros(self.whitening.dim());
+        let mut starts: Vec<DVector<f64>> = if self.mean_collides(&zero, ctl) {
+            let never = std::sync::atomic::AtomicBool::new(false);
+            self.path_start(ctl, &never, 1).into_iter().collect()
+        } else {
+            Vec::new()
+        };
+        starts.extend(self.detour_starts(n - starts.len(), ctl));
         let draws = self.restart_draws(n);
         starts.extend(draws.into_iter().take(n - starts.len()));
         starts
