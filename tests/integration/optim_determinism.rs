@@ -2,18 +2,10 @@
 //! repeated runs and across 1 and 2 rayon worker threads, with the
 //! restarts (which run in parallel) included.
 
+use crate::common::requests::answer_with_threads;
 use dpmp::fixtures::{typical_request, ExampleSettings};
-use dpmp::optim::{optimize, OptimizeRequest, Status};
+use dpmp::optim::Status;
 use dpmp::robot::Robot;
-
-fn answer_with_threads(req: &OptimizeRequest, robot: &Robot, threads: usize) -> (Status, String) {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .unwrap();
-    let resp = pool.install(|| optimize(req, robot)).unwrap();
-    (resp.status, resp.deterministic_json())
-}
 
 #[test]
 fn parallel_restarts_give_the_same_bytes_on_one_or_two_threads() {

@@ -3,6 +3,7 @@
 //! answer is `optimal`, clear of the wall against the meshes at 10,000
 //! phases, and the same bytes on one or two threads.
 
+use crate::common::requests::answer_with_threads;
 use dpmp::optim::{optimize, OptimizeRequest, Status};
 use dpmp::promp::Basis;
 use dpmp::robot::Robot;
@@ -34,16 +35,6 @@ fn swing_across_a_wall() -> OptimizeRequest {
         }],
     }))
     .unwrap()
-}
-
-fn answer_with_threads(req: &OptimizeRequest, robot: &Robot, threads: usize) -> String {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .unwrap();
-    pool.install(|| optimize(req, robot))
-        .unwrap()
-        .deterministic_json()
 }
 
 #[test]
@@ -89,6 +80,6 @@ fn a_colliding_mean_races_a_planned_path_and_the_answer_clears_the_meshes() {
         "dense {worst} < certified {certified}"
     );
     // Same bytes whatever the thread count.
-    let reference = answer_with_threads(&req, &robot, 1);
-    assert_eq!(answer_with_threads(&req, &robot, 2), reference);
+    let (_, reference) = answer_with_threads(&req, &robot, 1);
+    assert_eq!(answer_with_threads(&req, &robot, 2).1, reference);
 }

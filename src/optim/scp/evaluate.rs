@@ -88,6 +88,18 @@ impl GridEval {
     pub(in crate::optim) fn feasible(&self) -> bool {
         !self.interrupted && self.linear_ok && self.true_violation <= FEASIBILITY_TOLERANCE
     }
+
+    /// Whether the iterate collides with an obstacle (signed distance below
+    /// zero) at an optimisation phase: an obstacle across it, not merely
+    /// near it. `false` when the evaluation was interrupted.
+    pub(in crate::optim) fn collides(&self) -> bool {
+        !self.interrupted
+            && self
+                .pairs
+                .iter()
+                .flat_map(|phase| phase.list.iter())
+                .any(|c| c.distance < 0.0)
+    }
 }
 
 impl Problem {

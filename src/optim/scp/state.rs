@@ -211,10 +211,10 @@ impl<'a> Scp<'a> {
         }
     }
 
-    /// The current iterate's true violation (what must reach zero: clearance
-    /// deficits and goal excess, summed).
-    pub(in crate::optim) fn true_violation(&self) -> f64 {
-        self.eval.true_violation
+    /// The current iterate's evaluation on the optimisation phases (its
+    /// true violation, whether it collides).
+    pub(in crate::optim) fn iterate(&self) -> &GridEval {
+        &self.eval
     }
 
     /// The counters of the work done so far.

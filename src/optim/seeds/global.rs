@@ -26,7 +26,7 @@
 use crate::optim::problem::Problem;
 use crate::optim::report::Status;
 use crate::optim::scp::{Progress, Scp};
-use crate::optim::seeds::restart::{race_lanes, Lane, Race, Spent};
+use crate::optim::seeds::restart::{closest_optimal, race_lanes, Lane, Race, Spent};
 use crate::optim::solution::{Solution, SolveControl};
 use crate::Result;
 use nalgebra::DVector;
@@ -44,11 +44,11 @@ impl Problem {
     pub(in crate::optim) fn first_run(&self, ctl: &SolveControl) -> Result<Solution> {
         let zero = DVector::zeros(self.whitening.dim());
         let max_iterations = self.options.max_iterations;
-        if !self.mean_collides(&zero, ctl) {
-            return self.run(&zero, &zero, max_iterations, ctl);
-        }
         let began = std::time::Instant::now();
         let mut mean = Scp::new(self, &zero, &zero, max_iterations, ctl);
+        if !(self.both_ends_fixed() && mean.iterate().collides()) {
+            return mean.run();
+        }
         let mean_ended = AtomicBool::new(false);
         let mut head_start = || {
             let progress = mean.advance(HEAD_START);
@@ -85,20 +85,19 @@ impl Problem {
         }
     }
 
+    /// Whether the problem fixes both ends as configurations (`start` and
+    /// `options.final_configuration`): what the planner joins.
+    fn both_ends_fixed(&self) -> bool {
+        self.linear.start.is_some() && self.linear.final_configuration.is_some()
+    }
+
     /// Whether both ends are configurations and the prior mean's
-    /// trajectory collides with an obstacle (signed distance below zero)
-    /// at an optimisation phase.
+    /// trajectory collides with an obstacle at an optimisation phase.
     pub(super) fn mean_collides(&self, zero: &DVector<f64>, ctl: &SolveControl) -> bool {
-        if self.linear.start.is_none() || self.linear.final_configuration.is_none() {
-            return false;
-        }
-        let mean = self.evaluate_grid(&self.grid, zero.clone(), zero, ctl);
-        !mean.interrupted
-            && mean
-                .pairs
-                .iter()
-                .flat_map(|phase| phase.list.iter())
-                .any(|c| c.distance < 0.0)
+        self.both_ends_fixed()
+            && self
+                .evaluate_grid(&self.grid, zero.clone(), zero, ctl)
+                .collides()
     }
 }
 
@@ -111,13 +110,7 @@ fn first_of(race: Race, began: std::time::Instant) -> Option<Solution> {
         finished,
         unfinished,
     } = race;
-    let best = finished
-        .iter()
-        .enumerate()
-        .filter_map(|(k, run)| run.as_ref().map(|r| (k, r)))
-        .filter(|(_, r)| r.status == Status::Optimal)
-        .min_by(|(i, a), (j, b)| a.mahalanobis.total_cmp(&b.mahalanobis).then(i.cmp(j)))
-        .map(|(k, _)| k);
+    let best = closest_optimal(&finished);
     let mut runs: Vec<(usize, Solution)> = finished
         .into_iter()
         .enumerate()

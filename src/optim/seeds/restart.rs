@@ -90,13 +90,8 @@ impl Problem {
             spent.add(&run.stats);
         }
         let stopped = ctl.stop_reason();
-        let best = race
-            .finished
-            .into_iter()
-            .enumerate()
-            .filter_map(|(k, run)| run.map(|r| (k, r)))
-            .filter(|(_, r)| r.status == Status::Optimal)
-            .min_by(|(i, a), (j, b)| a.mahalanobis.total_cmp(&b.mahalanobis).then(i.cmp(j)));
+        let best = closest_optimal(&race.finished)
+            .and_then(|k| race.finished.into_iter().nth(k).flatten().map(|r| (k, r)));
         match (best, stopped) {
             (Some((k, sol)), _) => {
                 let mut note = format!(
@@ -226,6 +221,17 @@ impl Problem {
     }
 }
 
+/// The index of the closest `optimal` run among `runs` (lowest Mahalanobis
+/// distance, ties to the lower index): the race's pick.
+pub(super) fn closest_optimal(runs: &[Option<Solution>]) -> Option<usize> {
+    runs.iter()
+        .enumerate()
+        .filter_map(|(k, run)| run.as_ref().map(|r| (k, r)))
+        .filter(|(_, r)| r.status == Status::Optimal)
+        .min_by(|(i, a), (j, b)| a.mahalanobis.total_cmp(&b.mahalanobis).then(i.cmp(j)))
+        .map(|(k, _)| k)
+}
+
 /// Iterations each restart takes per round of [`Problem::race`]: small
 /// enough that the runs still going when one ends `optimal` have not spent
 /// much more, large enough that a round's parallel work is not dominated
@@ -260,13 +266,13 @@ const HOPELESS: f64 = 0.1;
 fn stop_hopeless(lanes: &mut [Lane]) {
     let near = lanes
         .iter()
-        .any(|l| matches!(l, Lane::Running(s) if s.true_violation() <= NEAR_FEASIBLE));
+        .any(|l| matches!(l, Lane::Running(s) if s.iterate().true_violation <= NEAR_FEASIBLE));
     if !near {
         return;
     }
     for lane in lanes.iter_mut() {
         if let Lane::Running(scp) = lane {
-            if scp.true_violation() > HOPELESS {
+            if scp.iterate().true_violation > HOPELESS {
                 *lane = Lane::Stopped(scp.stats().clone());
             }
         }

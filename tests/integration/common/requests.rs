@@ -1,7 +1,7 @@
 //! Generated typical optimiser requests, as structs and as JSON bodies.
 
 use dpmp::fixtures::{typical_request, ExampleSettings};
-use dpmp::optim::OptimizeRequest;
+use dpmp::optim::{optimize, OptimizeRequest, Status};
 use dpmp::robot::Robot;
 use serde_json::Value;
 
@@ -15,4 +15,19 @@ pub fn typical(seed: u64, settings: &ExampleSettings) -> (Robot, OptimizeRequest
 /// The typical request of `seed` with `settings` (for the Panda) as JSON.
 pub fn typical_json(seed: u64, settings: &ExampleSettings) -> Value {
     serde_json::to_value(typical(seed, settings).1).unwrap()
+}
+
+/// `optimize` on a rayon pool of `threads` workers: the status and the
+/// answer's deterministic JSON (every `solve_ms` 0).
+pub fn answer_with_threads(
+    req: &OptimizeRequest,
+    robot: &Robot,
+    threads: usize,
+) -> (Status, String) {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    let resp = pool.install(|| optimize(req, robot)).unwrap();
+    (resp.status, resp.deterministic_json())
 }
