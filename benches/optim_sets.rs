@@ -1,8 +1,10 @@
-//! The optimiser's two benchmark sets with the default options, in one run:
-//! the typical 100 (`fixtures::typical_request`, every one labelled
-//! feasible in `problems/typical/labels.json`) and the hard set
+//! The optimiser's three benchmark sets with the default options, in one
+//! run: the typical 100 (`fixtures::typical_request`, every one labelled
+//! feasible in `problems/typical/labels.json`), the hard set
 //! (`problems/hard/`, `dpmp bench make-problems --set hard`: intruders
-//! beside the demonstrated path, labelled by a long search).
+//! beside the demonstrated path, labelled by a long search) and the
+//! real-prior hard set (`problems/hard-real/`, `--set hard-real`: the same
+//! on the paper's 25 real annotation priors, four families).
 //!
 //! `cargo bench --bench optim_sets` prints per set: labelled-feasible
 //! solved, `optimal` answers that fail the dense verification of the
@@ -14,7 +16,7 @@
 //! request's own work (validation, the prior mean's report) that floor
 //! bounds `/v1/optimize`'s throughput (run with `RAYON_NUM_THREADS=1` for
 //! the CPU time a loaded service spends).
-//! `DPMP_BENCH_SET=typical|hard` runs one set; `DPMP_BENCH_LIMIT=N` the
+//! `DPMP_BENCH_SET=typical|hard|real` runs one set; `DPMP_BENCH_LIMIT=N` the
 //! first N problems of each; `DPMP_BENCH_PER_PROBLEM=FILE` writes one CSV
 //! row per problem (set, name, status, solved, ms, iterations, restarts)
 //! for the time-vs-success plot (`scripts/plot_sets.py FILE OUT.svg`).
@@ -73,16 +75,17 @@ fn typical_cases(robot: &Robot, limit: usize) -> Vec<Case> {
         .collect()
 }
 
-fn hard_cases(limit: usize) -> Vec<Case> {
-    load_dir(&repo().join("problems/hard"))
-        .expect("problems/hard")
+/// The labelled problem files of `problems/<dir>`.
+fn file_cases(dir: &str, limit: usize) -> Vec<Case> {
+    load_dir(&repo().join("problems").join(dir))
+        .expect(dir)
         .into_iter()
         .take(limit)
         .map(|(name, file)| {
-            let file: ProblemFile = file.expect("hard problem file");
+            let file: ProblemFile = file.expect("problem file");
             Case {
                 name,
-                request: serde_json::from_value(file.request).expect("hard request"),
+                request: serde_json::from_value(file.request).expect("problem request"),
                 feasible: file.expect.feasible == Some(true),
             }
         })
@@ -212,7 +215,10 @@ fn main() {
         sets.push(("typical", typical_cases(&robot, limit)));
     }
     if which.is_empty() || which == "hard" {
-        sets.push(("hard", hard_cases(limit)));
+        sets.push(("hard", file_cases("hard", limit)));
+    }
+    if which.is_empty() || which == "real" {
+        sets.push(("real", file_cases("hard-real", limit)));
     }
     for (set, cases) in sets {
         let rows: Vec<Row> = cases.iter().map(|c| measure(&robot, c)).collect();

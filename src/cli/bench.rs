@@ -5,6 +5,7 @@
 //!   plan pipeline on a generated dataset (network prior, then each method)
 //! - `dpmp bench make-problems --out problems/ [--seed S] [--per-category N]`
 //! - `dpmp bench make-problems --set hard --out problems/hard [--count N]`
+//! - `dpmp bench make-problems --set hard-real --annotations DIR --out problems/hard-real [--count N]`
 //! - `dpmp bench label-typical --out problems/typical/labels.json [--count N] [--restarts R]`
 //! - `dpmp bench world --data DIR [--split test] [--model DIR] [--out FILE]`:
 //!   plans with no world, the depth-sensed world and the true scene, each
@@ -12,6 +13,7 @@
 //! - `dpmp bench moveit --problems DIR [--out DIR] [--limit N]`:
 //!   MotionBenchMaker's MoveIt problems, a table per scene
 
+use crate::bench::hard_set::real;
 use crate::bench::{
     self, method_from_name, HardSettings, MakeSettings, RunSettings, DEFAULT_METHODS,
 };
@@ -146,13 +148,19 @@ pub struct MakeArgs {
     /// Problems per category (7 categories; the suite only).
     #[arg(long, default_value_t = 9)]
     pub per_category: usize,
-    /// Which set: `suite` (the seven categories) or `hard` (intruders
-    /// beside the demonstrated path, labelled by a long search).
-    #[arg(long, default_value = "suite", value_parser = ["suite", "hard"])]
+    /// Which set: `suite` (the seven categories), `hard` (intruders beside
+    /// the demonstrated path, labelled by a long search) or `hard-real`
+    /// (the same on the paper's real annotation priors; needs
+    /// --annotations).
+    #[arg(long, default_value = "suite", value_parser = ["suite", "hard", "hard-real"])]
     pub set: String,
-    /// Problems of the hard set.
+    /// Problems of the hard sets.
     #[arg(long, default_value_t = 200)]
     pub count: usize,
+    /// hard-real: the annotation folder (J1..J7/K.json, the paper's
+    /// `dpmp-annotation`).
+    #[arg(long, required_if_eq("set", "hard-real"))]
+    pub annotations: Option<PathBuf>,
     /// Hard set: skip the long-search labels (every label unknown).
     #[arg(long)]
     pub no_label: bool,
@@ -183,6 +191,15 @@ fn make(args: MakeArgs) -> Result<()> {
             progress: true,
         };
         bench::make_hard_set(&generator, &settings).map_err(super::as_flag_error)?
+    } else if let (true, Some(dir)) = (args.set == "hard-real", &args.annotations) {
+        let targets = real::load_targets(dir)?;
+        let settings = HardSettings {
+            seed: args.seed,
+            count: args.count,
+            label: !args.no_label,
+            progress: true,
+        };
+        real::make_real_set(&robot, &targets, &settings).map_err(super::as_flag_error)?
     } else {
         let settings = MakeSettings {
             seed: args.seed,

@@ -200,18 +200,7 @@ fn count_joint_dirs(dir: &Path) -> usize {
 /// Load target `index` from an annotation folder (`dir/J1/index.json`, ...).
 /// Errors name the file and the field inside it.
 pub fn load_dir(dir: &Path, index: usize) -> Result<Prior> {
-    let n_joints = count_joint_dirs(dir);
-    if n_joints == 0 {
-        return Err(Error::file(dir, "no joint folders J1, J2, ... found"));
-    }
-    let mut joints = Vec::with_capacity(n_joints);
-    for j in 1..=n_joints {
-        let path = dir.join(format!("J{j}")).join(format!("{index}.json"));
-        let text = std::fs::read_to_string(&path).map_err(|e| Error::file(&path, e.to_string()))?;
-        let joint: JointAnnotation = serde_json::from_str(&text)
-            .map_err(|e| Error::file(&path, format!("malformed annotation: {e}")))?;
-        joints.push(joint);
-    }
+    let joints = read_joints(dir, index)?;
     let n_basis = joints[0].mean_weights.len();
     prior_from_joints(&joints, n_basis).map_err(|e| match e {
         Error::Invalid { field, message } => {
@@ -223,6 +212,24 @@ pub fn load_dir(dir: &Path, index: usize) -> Result<Prior> {
         }
         other => other,
     })
+}
+
+/// The raw per-joint annotations of target `index` (`dir/J1/index.json`,
+/// ...), parsed but neither decoded nor repaired. Errors name the file.
+pub fn read_joints(dir: &Path, index: usize) -> Result<Vec<JointAnnotation>> {
+    let n_joints = count_joint_dirs(dir);
+    if n_joints == 0 {
+        return Err(Error::file(dir, "no joint folders J1, J2, ... found"));
+    }
+    (1..=n_joints)
+        .map(|j| {
+            let path = dir.join(format!("J{j}")).join(format!("{index}.json"));
+            let text =
+                std::fs::read_to_string(&path).map_err(|e| Error::file(&path, e.to_string()))?;
+            serde_json::from_str(&text)
+                .map_err(|e| Error::file(&path, format!("malformed annotation: {e}")))
+        })
+        .collect()
 }
 
 /// `"[3].L[5]"` -> `(3, "L[5]")`.

@@ -28,6 +28,8 @@
 //! labelled-feasible problems only. The test suite re-verifies every
 //! witness against the file as written.
 
+pub mod real;
+
 use super::make_problems::{mean_path, round_significant, round_value, MeanPath};
 use super::problem_file::{Expect, Meta, ProblemFile, HARD_CATEGORY};
 use super::synth_target::draw_target;
@@ -63,6 +65,31 @@ pub const LABEL_RESTARTS: usize = 32;
 pub const LABEL_ITERATIONS: usize = 1000;
 /// Draws tried per problem before its seed is given up.
 const ATTEMPTS: u64 = 64;
+
+/// Where intruders are drawn: their radius, their centre's distance from
+/// the prior mean's TCP path, and the fraction of the motion they stand at.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct IntruderRanges {
+    /// Radius range (m).
+    pub radius_m: (f64, f64),
+    /// Range of the centre's distance from the mean TCP path (m).
+    pub offset_m: (f64, f64),
+    /// Range of the phase (fraction of the motion) beside which they stand.
+    pub phases: (f64, f64),
+    /// Whether the prior mean's final pose must clear them too (not only
+    /// its start and the goal point): needed when the goal fixes the final
+    /// pose; with a position goal another wrist pose may reach it, and the
+    /// long search decides.
+    pub final_pose_clear: bool,
+}
+
+/// The intruders of the synthetic and example families.
+pub const HARD_INTRUDERS: IntruderRanges = IntruderRanges {
+    radius_m: INTRUDER_RADIUS_M,
+    offset_m: INTRUDER_OFFSET_M,
+    phases: INTRUDER_PHASES,
+    final_pose_clear: true,
+};
 /// The mean's start and final poses keep this much more than the
 /// clearance from every intruder.
 const ENDS_MARGIN_M: f64 = 0.005;
@@ -83,6 +110,18 @@ pub struct HardSettings {
 /// Generate `settings.count` hard problems on the rayon pool,
 /// deterministic in `settings.seed`, labelled as the module docs say.
 pub fn make_hard_set(generator: &Generator, settings: &HardSettings) -> Result<Vec<ProblemFile>> {
+    make_set(settings, "hard problems", |i, seed| {
+        make_hard_one(generator, i, seed, settings.label)
+    })
+}
+
+/// `settings.count` problems, problem `i` made by `one(i, seed * 100_000 +
+/// i)` on the rayon pool, with a progress bar naming `what`.
+fn make_set(
+    settings: &HardSettings,
+    what: &str,
+    one: impl Fn(usize, u64) -> Result<ProblemFile> + Sync,
+) -> Result<Vec<ProblemFile>> {
     if settings.count == 0 || settings.count > 10_000 {
         return Err(Error::invalid(
             "count",
@@ -93,17 +132,40 @@ pub fn make_hard_set(generator: &Generator, settings: &HardSettings) -> Result<V
         .seed
         .checked_mul(100_000)
         .ok_or_else(|| Error::invalid("seed", "too large"))?;
-    let bar = super::runner::progress_bar(settings.count, settings.progress, "hard problems");
+    let bar = super::runner::progress_bar(settings.count, settings.progress, what);
     let out = (0..settings.count)
         .into_par_iter()
         .map(|i| {
-            let p = make_hard_one(generator, i, base + i as u64, settings.label);
+            let p = one(i, base + i as u64);
             bar.inc(1);
             p
         })
         .collect::<Result<Vec<_>>>();
     bar.finish_and_clear();
     out
+}
+
+/// The file of a kept draw: `request` rounded, labelled by the long search
+/// when `label` says so.
+fn hard_file(
+    name: String,
+    request: &Value,
+    label: bool,
+    robot: &Robot,
+    meta: Meta,
+) -> Result<ProblemFile> {
+    let request = round_value(request);
+    let expect = if label {
+        long_search_label(&request, robot)?
+    } else {
+        unknown()
+    };
+    Ok(ProblemFile {
+        name,
+        request,
+        expect,
+        meta,
+    })
 }
 
 /// Problem `i` of the hard set from its own `seed`.
@@ -125,29 +187,20 @@ pub fn make_hard_one(
         let Some(base) = base_request(generator, family, &mut rng)? else {
             continue;
         };
-        let Some(request) = with_intruders(robot, base, intruders, &mut rng)? else {
+        let Some(request) = with_intruders(robot, base, intruders, &HARD_INTRUDERS, &mut rng)?
+        else {
             continue;
         };
-        let request = round_value(&request);
-        let expect = if label {
-            long_search_label(&request, robot)?
-        } else {
-            unknown()
+        let meta = Meta {
+            generator: HARD_GENERATOR.to_string(),
+            seed,
+            category: HARD_CATEGORY.to_string(),
+            description: format!(
+                "{family} prior and plant + {intruders} intruder(s) beside the mean path"
+            ),
+            reference_final_tcp: None,
         };
-        return Ok(ProblemFile {
-            name: format!("hard-{i:03}"),
-            request,
-            expect,
-            meta: Meta {
-                generator: HARD_GENERATOR.to_string(),
-                seed,
-                category: HARD_CATEGORY.to_string(),
-                description: format!(
-                    "{family} prior and plant + {intruders} intruder(s) beside the mean path"
-                ),
-                reference_final_tcp: None,
-            },
-        });
+        return hard_file(format!("hard-{i:03}"), &request, label, robot, meta);
     }
     Err(Error::Numerical(format!(
         "hard problem {i} (seed {seed}): no draw blocked the prior mean in {ATTEMPTS} attempts"
@@ -195,12 +248,14 @@ fn base_request(
     })))
 }
 
-/// `request` with `n` intruders beside its prior mean's path, or `None`
-/// when this draw does not block the mean with its ends clear.
+/// `request` with `n` intruders drawn from `ranges` beside its prior
+/// mean's path, or `None` when this draw does not block the mean with its
+/// ends clear.
 fn with_intruders(
     robot: &Robot,
     mut request: Value,
     n: usize,
+    ranges: &IntruderRanges,
     rng: &mut ChaCha8Rng,
 ) -> Result<Option<Value>> {
     let parsed: OptimizeRequest = serde_json::from_value(request.clone())
@@ -212,7 +267,7 @@ fn with_intruders(
     let goal = parsed.task.goal.as_ref().map(|g| Vector3::from(g.position));
     let mut placed = Vec::new();
     for k in 0..n {
-        let Some(intruder) = place_intruder(robot, &path, goal, k, rng)? else {
+        let Some(intruder) = place_intruder(robot, &path, goal, k, ranges, rng)? else {
             return Ok(None);
         };
         placed.push(intruder);
@@ -254,11 +309,12 @@ fn place_intruder(
     path: &MeanPath,
     goal: Option<Vector3<f64>>,
     k: usize,
+    ranges: &IntruderRanges,
     rng: &mut ChaCha8Rng,
 ) -> Result<Option<Obstacle>> {
     let n = path.tcp.len();
-    let lo = ((n as f64 * INTRUDER_PHASES.0) as usize).max(1);
-    let hi = ((n as f64 * INTRUDER_PHASES.1) as usize).min(n - 2);
+    let lo = ((n as f64 * ranges.phases.0) as usize).max(1);
+    let hi = ((n as f64 * ranges.phases.1) as usize).min(n - 2);
     for _ in 0..16 {
         let t = rng.gen_range(lo..=hi);
         let tangent = (path.tcp[t + 1] - path.tcp[t - 1]).normalize();
@@ -270,8 +326,8 @@ fn place_intruder(
             }
             v.normalize()
         };
-        let radius = rng.gen_range(INTRUDER_RADIUS_M.0..INTRUDER_RADIUS_M.1);
-        let centre = path.tcp[t] + across * rng.gen_range(INTRUDER_OFFSET_M.0..INTRUDER_OFFSET_M.1);
+        let radius = rng.gen_range(ranges.radius_m.0..ranges.radius_m.1);
+        let centre = path.tcp[t] + across * rng.gen_range(ranges.offset_m.0..ranges.offset_m.1);
         let berry = Obstacle {
             id: format!("intruder-{k}"),
             shape: ObstacleShape::Berry(BerryShape {
@@ -282,20 +338,42 @@ fn place_intruder(
                 stem_radius: 0.002,
             }),
         };
-        let scene = Scene::new(vec![berry.clone()])?;
-        let clear = |q: &[f64]| {
-            scene
-                .min_clearance(robot, &robot.fk(q))
-                .is_none_or(|c| c.distance >= HARD_CLEARANCE_M + ENDS_MARGIN_M)
-        };
-        let goal_clear = goal.is_none_or(|g| {
-            (g - centre).norm() - radius > HARD_GOAL_TOLERANCE_M + HARD_CLEARANCE_M + 0.02
-        });
-        if clear(&path.start) && clear(&path.end) && goal_clear {
+        if keeps_ends_clear(
+            robot,
+            path,
+            goal,
+            &berry,
+            (centre, radius),
+            ranges.final_pose_clear,
+        )? {
             return Ok(Some(berry));
         }
     }
     Ok(None)
+}
+
+/// Whether `berry` (its bounding ball `(centre, radius)`) keeps the mean's
+/// start pose (and with `final_pose` its final pose) [`ENDS_MARGIN_M`]
+/// beyond the clearance, and the goal well outside its tolerance, so the
+/// goal stays reachable.
+fn keeps_ends_clear(
+    robot: &Robot,
+    path: &MeanPath,
+    goal: Option<Vector3<f64>>,
+    berry: &Obstacle,
+    (centre, radius): (Vector3<f64>, f64),
+    final_pose: bool,
+) -> Result<bool> {
+    let scene = Scene::new(vec![berry.clone()])?;
+    let clear = |q: &[f64]| {
+        scene
+            .min_clearance(robot, &robot.fk(q))
+            .is_none_or(|c| c.distance >= HARD_CLEARANCE_M + ENDS_MARGIN_M)
+    };
+    let goal_clear = goal.is_none_or(|g| {
+        (g - centre).norm() - radius > HARD_GOAL_TOLERANCE_M + HARD_CLEARANCE_M + 0.02
+    });
+    Ok(clear(&path.start) && (!final_pose || clear(&path.end)) && goal_clear)
 }
 
 /// The long search's label of `request`: feasible with its `optimal`
