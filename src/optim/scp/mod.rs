@@ -43,8 +43,9 @@ use nalgebra::DVector;
 
 impl Problem {
     /// SCP towards the prior mean (the Mahalanobis-closest feasible weights).
-    /// When the mean is blocked and both ends are configurations, a run
-    /// from a collision-free path races it from the start (see
+    /// When the mean is blocked and the start and end are fixed (the end
+    /// as a configuration or a goal position), a run from a collision-free
+    /// path races it from the start (see
     /// [`global`](crate::optim::seeds::global)); when that first stage ends
     /// without a feasible answer, it is restarted from detours around the
     /// blocking obstacles and seeded prior draws (see

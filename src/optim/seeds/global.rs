@@ -7,8 +7,9 @@
 //! lies across the mean (a shelf board between the start and the goal, a
 //! berry across the demonstrated path) the side it picks may lead nowhere.
 //! The restarts ([`super::restart`]) only begin after that run has spent
-//! its iterations. So when the problem fixes both ends as configurations
-//! and the mean's trajectory collides with an obstacle at an optimisation
+//! its iterations. So when the problem fixes the start and the end (a
+//! configuration or a goal position, [`super::goal_pose`]) and the mean's
+//! trajectory collides with an obstacle at an optimisation
 //! phase (signed distance below zero: an obstacle across it, not merely
 //! near it), [`Problem::first_run`] asks the planner ([`super::path`]) for
 //! a collision-free path while the run from the mean takes its first
@@ -46,27 +47,44 @@ impl Problem {
         let max_iterations = self.options.max_iterations;
         let began = std::time::Instant::now();
         let mut mean = Scp::new(self, &zero, &zero, max_iterations, ctl);
-        if !(self.both_ends_fixed() && mean.iterate().collides()) {
+        if !(self.plannable() && mean.iterate().collides()) {
             return mean.run();
         }
-        let mean_ended = AtomicBool::new(false);
+        // The planner stops once the mean's run needs no race: it ended
+        // `optimal`, or it has left the obstacles.
+        let settled = AtomicBool::new(false);
         let mut head_start = || {
             let progress = mean.advance(HEAD_START);
-            if matches!(&progress, Progress::Done(s) if s.status == Status::Optimal) {
-                mean_ended.store(true, Ordering::Relaxed);
-            }
+            let settles = match &progress {
+                Progress::Done(s) => s.status == Status::Optimal,
+                Progress::Paused => !mean.iterate().collides(),
+            };
+            settled.store(settles, Ordering::Relaxed);
             progress
         };
-        let (progress, path) = if ctl.parallel() {
-            rayon::join(head_start, || self.path_start(ctl, &mean_ended, 0))
+        let (progress, mut path) = if ctl.parallel() {
+            rayon::join(head_start, || self.path_start(ctl, &settled, 0))
         } else {
             let progress = head_start();
-            (progress, self.path_start(ctl, &mean_ended, 0))
+            (progress, self.path_start(ctl, &settled, 0))
         };
         let mean_lane = match progress {
             // Optimal, a proof of infeasibility or a stop: nothing to race.
             Progress::Done(done) if done.status != Status::MaxIterations => return Ok(*done),
             Progress::Done(done) => Lane::Finished(done),
+            Progress::Paused if settled.load(Ordering::Relaxed) => {
+                // Out of the obstacles after the head start: the mean's run
+                // goes on alone, and the path's run follows only when that
+                // ends without a feasible answer (planned now if the
+                // planner was stopped: the same path, which depends only on
+                // the seed).
+                let alone = mean.run()?;
+                if alone.status != Status::MaxIterations {
+                    return Ok(alone);
+                }
+                path = path.or_else(|| self.path_start(ctl, &AtomicBool::new(false), 0));
+                Lane::Finished(Box::new(alone))
+            }
             Progress::Paused => Lane::Running(Box::new(mean)),
         };
         let Some(path) = path else {
@@ -85,16 +103,19 @@ impl Problem {
         }
     }
 
-    /// Whether the problem fixes both ends as configurations (`start` and
-    /// `options.final_configuration`): what the planner joins.
-    fn both_ends_fixed(&self) -> bool {
-        self.linear.start.is_some() && self.linear.final_configuration.is_some()
+    /// Whether the problem fixes the start configuration and the end (as
+    /// a configuration, `options.final_configuration`, or a goal
+    /// position): what the planner joins.
+    fn plannable(&self) -> bool {
+        self.linear.start.is_some()
+            && (self.linear.final_configuration.is_some() || self.goal.is_some())
     }
 
-    /// Whether both ends are configurations and the prior mean's
-    /// trajectory collides with an obstacle at an optimisation phase.
+    /// Whether the planner applies ([`Problem::plannable`]) and the prior
+    /// mean's trajectory collides with an obstacle at an optimisation
+    /// phase.
     pub(super) fn mean_collides(&self, zero: &DVector<f64>, ctl: &SolveControl) -> bool {
-        self.both_ends_fixed()
+        self.plannable()
             && self
                 .evaluate_grid(&self.grid, zero.clone(), zero, ctl)
                 .collides()

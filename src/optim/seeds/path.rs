@@ -3,9 +3,10 @@
 //! the demonstrated path): [`super::global`] races it against the run from
 //! the prior mean.
 //!
-//! When the problem fixes both ends as configurations (`start` and
-//! `options.final_configuration`), [`Problem::path_start`] runs
-//! RRT-Connect (Kuffner and LaValle, 2000): two trees grown from the ends
+//! When the problem fixes the start configuration and the end as a
+//! configuration (`options.final_configuration`) or a goal position (then
+//! a clear configuration of the goal region, [`super::goal_pose`]),
+//! [`Problem::path_start`] runs RRT-Connect (Kuffner and LaValle, 2000): two trees grown from the ends
 //! towards seeded uniform samples of the joint box, each extension a
 //! straight joint-space step of at most [`PATH_STEP_RAD`] checked at
 //! [`EDGE_RESOLUTION_RAD`], until the trees meet. The path is then
@@ -120,9 +121,10 @@ fn lerp(a: &[f64], b: &[f64], t: f64) -> Vec<f64> {
 
 impl Problem {
     /// The whitened seed of a collision-free path between the start and
-    /// the final configuration, when both are fixed and clear of the
-    /// obstacles by the clearance and RRT-Connect finds a path within its
-    /// budget and `ctl` (see the module docs).
+    /// the planner's goal ([`Problem::planner_goal`]: the final
+    /// configuration, or one reaching the goal position), when both are
+    /// clear of the obstacles by the clearance and RRT-Connect finds a path
+    /// within its budget and `ctl` (see the module docs).
     /// `abandon` stops the search like `ctl` does (the run it would race
     /// has already ended).
     /// `attempt` picks the planner's random stream (0 for the global
@@ -134,7 +136,10 @@ impl Problem {
         attempt: u64,
     ) -> Option<DVector<f64>> {
         let start = self.linear.start.clone()?;
-        let goal = self.linear.final_configuration.clone()?;
+        if abandon.load(Ordering::Relaxed) {
+            return None;
+        }
+        let goal = self.planner_goal(attempt)?;
         let planner = Planner {
             problem: self,
             ends: [start.clone(), goal.clone()],
@@ -142,9 +147,7 @@ impl Problem {
                 self.options.seed ^ PATH_STREAM ^ attempt.wrapping_mul(ATTEMPT_STRIDE),
             ),
         };
-        if !(planner.clear_by(&start, self.clearance_m)
-            && planner.clear_by(&goal, self.clearance_m))
-        {
+        if !(self.clear_by(&start, self.clearance_m) && self.clear_by(&goal, self.clearance_m)) {
             return None;
         }
         let mut planner = planner;
@@ -165,15 +168,6 @@ struct Planner<'a> {
 }
 
 impl Planner<'_> {
-    /// Whether configuration `q` is clear of every obstacle by `limit` (m)
-    /// (always, without obstacles).
-    fn clear_by(&self, q: &[f64], limit: f64) -> bool {
-        let p = self.problem;
-        p.scene
-            .closest_within(&p.robot, &p.robot.fk(q), limit)
-            .is_none()
-    }
-
     /// Whether `q` is free: clear by the clearance asked plus
     /// [`PATH_MARGIN_M`], or by the clearance alone within
     /// [`END_ZONE_RAD`] of an end (a grasp or a placement starts and ends
@@ -182,7 +176,7 @@ impl Planner<'_> {
         let p = self.problem;
         let near_end = self.ends.iter().any(|e| max_norm(e, q) <= END_ZONE_RAD);
         let margin = if near_end { 0.0 } else { PATH_MARGIN_M };
-        self.clear_by(q, p.clearance_m + margin)
+        p.clear_by(q, p.clearance_m + margin)
     }
 
     /// Whether the straight edge from `a` to `b` is free at

@@ -8,8 +8,9 @@
 //! iteration limit). On the typical problems (`fixtures::typical`) most such
 //! problems are feasible: a run started elsewhere finds a feasible answer.
 //! So [`Problem::solve`] restarts `options.restarts` times, still
-//! minimising the distance to the prior mean: first, when both ends are
-//! configurations and the mean collides, from a second collision-free path
+//! minimising the distance to the prior mean: first, when the planner
+//! applies (the start fixed, the end a configuration or a goal position)
+//! and the mean collides, from a second collision-free path
 //! (the planner of [`super::path`] on another random stream than the global
 //! stage's), then from detours around the
 //! obstacles that block the mean (the prior conditioned to pass each on its
