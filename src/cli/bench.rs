@@ -183,31 +183,29 @@ pub fn run(args: BenchArgs) -> Result<()> {
 fn make(args: MakeArgs) -> Result<()> {
     let robot = args.robot.load()?;
     let generator = bench::make_problems::generator(&robot)?;
-    let problems = if args.set == "hard" {
-        let settings = HardSettings {
-            seed: args.seed,
-            count: args.count,
-            label: !args.no_label,
-            progress: true,
-        };
-        bench::make_hard_set(&generator, &settings).map_err(super::as_flag_error)?
-    } else if let (true, Some(dir)) = (args.set == "hard-real", &args.annotations) {
-        let targets = real::load_targets(dir)?;
-        let settings = HardSettings {
-            seed: args.seed,
-            count: args.count,
-            label: !args.no_label,
-            progress: true,
-        };
-        real::make_real_set(&robot, &targets, &settings).map_err(super::as_flag_error)?
-    } else {
-        let settings = MakeSettings {
-            seed: args.seed,
-            per_category: args.per_category,
-            progress: true,
-        };
-        bench::make_problems(&generator, &settings).map_err(super::as_flag_error)?
+    let hard = HardSettings {
+        seed: args.seed,
+        count: args.count,
+        label: !args.no_label,
+        progress: true,
     };
+    let problems = match (args.set.as_str(), &args.annotations) {
+        ("hard", _) => bench::make_hard_set(&generator, &hard),
+        ("hard-real", Some(dir)) => real::make_real_set(&robot, &real::load_targets(dir)?, &hard),
+        ("hard-real", None) => Err(Error::invalid(
+            "--annotations",
+            "--set hard-real needs the annotation folder",
+        )),
+        _ => {
+            let settings = MakeSettings {
+                seed: args.seed,
+                per_category: args.per_category,
+                progress: true,
+            };
+            bench::make_problems(&generator, &settings)
+        }
+    }
+    .map_err(super::as_flag_error)?;
     std::fs::create_dir_all(&args.out).map_err(|e| Error::write(&args.out, e.to_string()))?;
     for p in &problems {
         p.save(&args.out)?;

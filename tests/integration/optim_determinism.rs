@@ -2,21 +2,14 @@
 //! repeated runs and across 1 and 2 rayon worker threads, with the
 //! restarts (which run in parallel) included.
 
-use crate::common::requests::answer_with_threads;
+use crate::common::requests::{answer_with_threads, needs_restarts};
 use dpmp::fixtures::{typical_request, ExampleSettings};
 use dpmp::optim::Status;
 use dpmp::robot::Robot;
 
 #[test]
 fn parallel_restarts_give_the_same_bytes_on_one_or_two_threads() {
-    // Typical problem 400 needs the restarts (see optim_requests).
-    let robot = Robot::panda().unwrap();
-    let settings = ExampleSettings {
-        // Problem 400 needs its restarts on the paper's timing (free ends).
-        boundary: dpmp::optim::Boundary::Free,
-        ..Default::default()
-    };
-    let req = typical_request(&robot, 400, &settings).unwrap();
+    let (robot, req) = needs_restarts();
     let (status, reference) = answer_with_threads(&req, &robot, 1);
     assert_eq!(status, Status::Optimal);
     assert!(reference.contains("restart"), "the restarts must have run");
@@ -47,13 +40,7 @@ fn a_solve_sharing_the_cores_gives_the_same_bytes_as_one_alone() {
     use dpmp::optim::{optimize_with, Sharing, SolveControl};
     use std::sync::atomic::{AtomicUsize, Ordering};
     use std::sync::Arc;
-    let robot = Robot::panda().unwrap();
-    let settings = ExampleSettings {
-        boundary: dpmp::optim::Boundary::Free,
-        ..Default::default()
-    };
-    // Typical problem 400 on free ends runs its restarts.
-    let req = typical_request(&robot, 400, &settings).unwrap();
+    let (robot, req) = needs_restarts();
     let running = Arc::new(AtomicUsize::new(2));
     let shared = SolveControl {
         sharing: Some(Sharing {

@@ -2,7 +2,7 @@
 //! diagnoses, the annotation prior with repair, samples, determinism and
 //! cancellation.
 
-use crate::common::requests::typical;
+use crate::common::requests::{needs_restarts, typical};
 use crate::common::scene::sphere;
 use dpmp::fixtures::ExampleSettings;
 use dpmp::geometry::Sphere;
@@ -397,13 +397,10 @@ fn a_cancelled_solve_stops_with_max_iterations_and_a_warning() {
 
 #[test]
 fn a_local_minimum_from_the_prior_mean_is_escaped_by_a_seeded_restart() {
-    // Typical problem 400: the run from the prior mean ends in a local
-    // minimum of the violation (the hand against a berry: max_iterations),
-    // but the problem is feasible and a seeded restart solves it (397 of
-    // typical problems 100..=500 are solved without restarts).
-    let (robot, mut req) = request(400, 10);
-    // The scenario is on the paper's timing (free ends).
-    req.task.boundary = dpmp::optim::Boundary::Free;
+    // The run from the prior mean ends in a local minimum of the violation
+    // (the TCP short of the goal: max_iterations), but the problem is
+    // feasible and a seeded restart solves it.
+    let (robot, mut req) = needs_restarts();
     req.task.options.restarts = 0;
     let stuck = optimize(&req, &robot).unwrap();
     assert_eq!(stuck.status, Status::MaxIterations);

@@ -9,15 +9,22 @@
 //! So the candidates ([`Problem::goal_seeds`]) are, in order, the prior
 //! mean's final configuration, the final configurations of seeded prior
 //! draws, the mean's turned about the last joint, and uniform samples of
-//! the joint box; each is moved
-//! onto the goal by the robot's damped least-squares inverse kinematics
-//! with its null-space pull towards the candidate (the configuration stays
-//! the prior's where the goal allows), and the first that reaches the goal
-//! within [`GOAL_FRACTION`] of its tolerance (and the approach cone, when
-//! one is asked), lies inside the joint limits and clears every obstacle by
-//! the clearance asked is the goal. Draws come from `options.seed` and the
-//! planner's attempt, so the same problem gives the same goal; nothing here
-//! is part of the certificate (the SCP certifies the goal constraint).
+//! the joint box. Each is moved onto the goal by the robot's damped
+//! least-squares inverse kinematics (null-space pull towards the
+//! candidate), pushed within the goal region away from its closest
+//! obstacle ([`Problem::push_clear`]: the clearance gradient in the null
+//! space of the goal's rows, joints at a bound locked, and a pull back to
+//! where the push began so the pose stays the prior's where it can), and
+//! moved onto the goal again. A candidate *reaches* when it lies within
+//! [`GOAL_FRACTION`] of the goal's tolerance (and of the approach cone,
+//! when one is asked), inside the joint limits and clear of every obstacle
+//! by the clearance asked. Of the prior's own candidates (its mean and
+//! draws) that reach, the goal is the one the prior finds most likely at
+//! the end ([`Problem::closest_to_prior_end`]); when none does, the first
+//! of the others that reaches. Draws come from `options.seed` and the
+//! planner's attempt, so the same problem gives the same goal; the
+//! caller's stop is checked between candidates; nothing here is part of
+//! the certificate (the SCP certifies the goal constraint).
 
 use crate::optim::problem::linear::LinearSet;
 use crate::optim::problem::Problem;
@@ -49,15 +56,18 @@ pub const PUSH_PULL: f64 = 0.3;
 const PUSH_DAMPING: f64 = 1e-6;
 /// Fraction of the goal tolerance within which the TCP must reach it.
 pub const GOAL_FRACTION: f64 = 0.25;
+/// Ridge (rad²) of the prior's final-configuration covariance when the
+/// goal candidates are compared.
+pub const FINAL_RIDGE: f64 = 1e-6;
 /// Mixed into `options.seed` so the goal draws are not the restarts'.
 const GOAL_STREAM: u64 = 0x60a1_5eed;
 
 impl Problem {
     /// The final configuration the planner aims at: the request's
     /// `final_configuration`, else a clear configuration reaching the goal
-    /// position (see the module docs), else `None`. `attempt` picks the
-    /// stream of the draws.
-    pub(super) fn planner_goal(&self, attempt: u64) -> Option<Vec<f64>> {
+    /// position (see the module docs), else `None` (also once `stop` says
+    /// so). `attempt` picks the stream of the draws.
+    pub(super) fn planner_goal(&self, attempt: u64, stop: &dyn Fn() -> bool) -> Option<Vec<f64>> {
         if let Some(q) = &self.linear.final_configuration {
             return Some(q.clone());
         }
@@ -66,9 +76,55 @@ impl Problem {
             position: Point3::from(goal.position),
             approach_axis: self.approach().map(|(axis, _)| Unit::new_normalize(axis)),
         };
-        self.goal_seeds(attempt)
+        let seeds = self.goal_seeds(attempt);
+        let (prior, others) = seeds.split_at((1 + GOAL_DRAWS).min(seeds.len()));
+        let mut reached = Vec::new();
+        for seed in prior {
+            if stop() {
+                return None;
+            }
+            reached.extend(self.reach_goal(&target, goal.tolerance_m, seed.clone()));
+        }
+        if let Some(best) = self.closest_to_prior_end(reached) {
+            return Some(best);
+        }
+        for seed in others {
+            if stop() {
+                return None;
+            }
+            if let Some(q) = self.reach_goal(&target, goal.tolerance_m, seed.clone()) {
+                return Some(q);
+            }
+        }
+        None
+    }
+
+    /// Of `candidates`, the final configuration the prior finds most
+    /// likely: the lowest Mahalanobis distance under the prior's marginal
+    /// of the final configuration (`J Jᵀ` in whitened coordinates, `J` the
+    /// final configuration's Jacobian, with a [`FINAL_RIDGE`] ridge since
+    /// real priors are near-singular); ties to the earlier candidate.
+    fn closest_to_prior_end(&self, candidates: Vec<Vec<f64>>) -> Option<Vec<f64>> {
+        let jacobian = self.ends.position_jacobian(1);
+        let n = jacobian.nrows();
+        let covariance = &jacobian * jacobian.transpose() + DMatrix::identity(n, n) * FINAL_RIDGE;
+        let cholesky = covariance.cholesky()?;
+        let mean = self
+            .whitening
+            .weights(&DVector::zeros(self.whitening.dim()));
+        let mean_final = DVector::from_vec(self.ends.position(1, &mean));
+        let cost = |q: &Vec<f64>| {
+            let d = DVector::from_column_slice(q) - &mean_final;
+            d.dot(&cholesky.solve(&d))
+        };
+        candidates
             .into_iter()
-            .find_map(|seed| self.reach_goal(&target, goal.tolerance_m, seed))
+            .map(|q| (cost(&q), q))
+            .fold(None, |best: Option<(f64, Vec<f64>)>, (c, q)| match best {
+                Some((b, _)) if b <= c => best,
+                _ => Some((c, q)),
+            })
+            .map(|(_, q)| q)
     }
 
     /// The configurations inverse kinematics starts from, in order: the
@@ -336,7 +392,9 @@ mod tests {
             let mean = p.whitening.weights(&DVector::zeros(p.whitening.dim()));
             let mean_final = p.ends.position(1, &mean);
             assert!(exact_clearance(&p, &mean_final) < p.clearance_m, "{name}");
-            let q = p.planner_goal(0).expect("a clear goal configuration");
+            let q = p
+                .planner_goal(0, &|| false)
+                .expect("a clear goal configuration");
             let goal = p.goal.as_ref().unwrap();
             let tcp = p.robot.tcp_pose(&q).translation.vector;
             let miss = (tcp - Vector3::from(goal.position)).norm();
@@ -347,7 +405,7 @@ mod tests {
             }
             let clear = exact_clearance(&p, &q);
             assert!(clear >= p.clearance_m, "{name}: {clear}");
-            assert_eq!(p.planner_goal(0), Some(q), "{name}");
+            assert_eq!(p.planner_goal(0, &|| false), Some(q), "{name}");
         }
     }
 

@@ -136,10 +136,8 @@ impl Problem {
         attempt: u64,
     ) -> Option<DVector<f64>> {
         let start = self.linear.start.clone()?;
-        if abandon.load(Ordering::Relaxed) {
-            return None;
-        }
-        let goal = self.planner_goal(attempt)?;
+        let stop = || ctl.should_stop() || abandon.load(Ordering::Relaxed);
+        let goal = self.planner_goal(attempt, &stop)?;
         let planner = Planner {
             problem: self,
             ends: [start.clone(), goal.clone()],
@@ -151,9 +149,7 @@ impl Problem {
             return None;
         }
         let mut planner = planner;
-        let path = planner.rrt_connect(start, goal, &|| {
-            ctl.should_stop() || abandon.load(Ordering::Relaxed)
-        })?;
+        let path = planner.rrt_connect(start, goal, &stop)?;
         let path = planner.shortcut(path);
         self.fit_path(&path)
     }

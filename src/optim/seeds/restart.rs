@@ -432,7 +432,11 @@ mod tests {
             .min_by(|(i, a), (j, b)| a.mahalanobis.total_cmp(&b.mahalanobis).then(i.cmp(j)))
             .map(|(k, _)| k)
             .unwrap();
-        let answer = p.solve(&ctl).unwrap();
+        // The plain run from the mean (the global stage aside) is stuck,
+        // and the restarts answer with the race's pick.
+        let first = p.run(&mean, &mean, p.options.max_iterations, &ctl).unwrap();
+        assert_eq!(first.status, Status::MaxIterations);
+        let answer = p.restart_if_stuck(first, &ctl).unwrap();
         assert_eq!(answer.status, Status::Optimal);
         assert_eq!(answer.weights, full[expected].weights);
         let race = p.race(&starts, &mean, cap, &ctl);

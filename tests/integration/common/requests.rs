@@ -12,6 +12,20 @@ pub fn typical(seed: u64, settings: &ExampleSettings) -> (Robot, OptimizeRequest
     (robot, request)
 }
 
+/// A request whose run from the prior mean ends in a local minimum and
+/// that a seeded restart solves: typical problem 195 on the paper's timing
+/// (free ends) without its start configuration, so that the global stage
+/// (which plans from a start) does not race it first.
+pub fn needs_restarts() -> (Robot, OptimizeRequest) {
+    let settings = ExampleSettings {
+        boundary: dpmp::optim::Boundary::Free,
+        ..Default::default()
+    };
+    let (robot, mut request) = typical(195, &settings);
+    request.task.start = None;
+    (robot, request)
+}
+
 /// The typical request of `seed` with `settings` (for the Panda) as JSON.
 pub fn typical_json(seed: u64, settings: &ExampleSettings) -> Value {
     serde_json::to_value(typical(seed, settings).1).unwrap()
