@@ -26,11 +26,12 @@
 //! caller's stop is checked between candidates; nothing here is part of
 //! the certificate (the SCP certifies the goal constraint).
 
+use super::path::uniform_configuration;
 use crate::optim::problem::linear::LinearSet;
 use crate::optim::problem::Problem;
 use crate::robot::{IkOptions, IkTarget};
 use nalgebra::{DMatrix, DVector, Point3, Unit, Vector3};
-use rand::{Rng, SeedableRng};
+use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 /// Prior draws tried after the prior mean's final configuration.
@@ -109,10 +110,7 @@ impl Problem {
         let n = jacobian.nrows();
         let covariance = &jacobian * jacobian.transpose() + DMatrix::identity(n, n) * FINAL_RIDGE;
         let cholesky = covariance.cholesky()?;
-        let mean = self
-            .whitening
-            .weights(&DVector::zeros(self.whitening.dim()));
-        let mean_final = DVector::from_vec(self.ends.position(1, &mean));
+        let mean_final = DVector::from_vec(self.prior_mean_final());
         let cost = |q: &Vec<f64>| {
             let d = DVector::from_column_slice(q) - &mean_final;
             d.dot(&cholesky.solve(&d))
@@ -135,10 +133,7 @@ impl Problem {
     /// [`GOAL_RANDOM`] uniform samples of the joint box.
     fn goal_seeds(&self, attempt: u64) -> Vec<Vec<f64>> {
         let mut rng = ChaCha8Rng::seed_from_u64(self.options.seed ^ GOAL_STREAM ^ attempt);
-        let mean = self
-            .whitening
-            .weights(&DVector::zeros(self.whitening.dim()));
-        let mean_final = self.ends.position(1, &mean);
+        let mean_final = self.prior_mean_final();
         let mut seeds = vec![mean_final.clone()];
         seeds.extend(
             self.prior
@@ -154,15 +149,7 @@ impl Problem {
                 seeds.push(rolled);
             }
         }
-        let linear = &self.linear;
-        seeds.extend((0..GOAL_RANDOM).map(|_| {
-            linear
-                .lower
-                .iter()
-                .zip(&linear.upper)
-                .map(|(lo, hi)| rng.gen_range(*lo..=*hi))
-                .collect()
-        }));
+        seeds.extend((0..GOAL_RANDOM).map(|_| uniform_configuration(&self.linear, &mut rng)));
         seeds
     }
 
@@ -330,6 +317,14 @@ impl Problem {
             3 => (0..3).map(|k| tilt[k] * jacobian[(3 + k, j)]).sum(),
             _ => (0..3).map(|k| other[k] * jacobian[(3 + k, j)]).sum(),
         })
+    }
+
+    /// The prior mean's final configuration.
+    fn prior_mean_final(&self) -> Vec<f64> {
+        let mean = self
+            .whitening
+            .weights(&DVector::zeros(self.whitening.dim()));
+        self.ends.position(1, &mean)
     }
 
     /// Whether `q` lies inside the problem's joint position bounds.

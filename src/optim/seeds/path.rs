@@ -30,6 +30,7 @@
 //! path. The deadline and the cancel flag stop it, and it gives up after
 //! [`PATH_MAX_SAMPLES`] samples.
 
+use crate::optim::problem::linear::LinearSet;
 use crate::optim::problem::Problem;
 use crate::optim::solution::SolveControl;
 use nalgebra::{DMatrix, DVector};
@@ -220,13 +221,7 @@ impl Planner<'_> {
 
     /// A uniform sample of the joint box.
     fn sample(&mut self) -> Vec<f64> {
-        let linear = &self.problem.linear;
-        linear
-            .lower
-            .iter()
-            .zip(&linear.upper)
-            .map(|(lo, hi)| self.rng.gen_range(*lo..=*hi))
-            .collect()
+        uniform_configuration(&self.problem.linear, &mut self.rng)
     }
 
     /// RRT-Connect from `start` to `goal`: the configurations of a free
@@ -315,6 +310,16 @@ impl Problem {
         let z = normal.cholesky()?.solve(&(a.transpose() * b));
         z.iter().all(|v| v.is_finite()).then_some(z)
     }
+}
+
+/// A uniform sample of the box of the problem's joint position bounds.
+pub(super) fn uniform_configuration(linear: &LinearSet, rng: &mut impl Rng) -> Vec<f64> {
+    linear
+        .lower
+        .iter()
+        .zip(&linear.upper)
+        .map(|(lo, hi)| rng.gen_range(*lo..=*hi))
+        .collect()
 }
 
 /// The configuration a fraction `s` in [0, 1] of the way along `path`, by
