@@ -31,6 +31,7 @@
 //! phases join the optimisation set and the loop goes on.
 
 mod evaluate;
+mod line_search;
 mod state;
 mod subproblem;
 pub mod working_set;

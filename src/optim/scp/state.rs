@@ -35,6 +35,7 @@ use crate::optim::problem::Problem;
 use crate::optim::qp::{ClarabelInfo, QpFailure, QpSolution};
 use crate::optim::report::FinalQp;
 use crate::optim::scp::evaluate::GridEval;
+use crate::optim::scp::line_search::{Correction, StepTrial};
 use crate::optim::scp::subproblem::{ActiveRows, Linearisation};
 use crate::optim::solution::{timed, Solution, SolveControl, SolveStats};
 use crate::optim::stop_reason::{Interruption, StopReason};
@@ -133,6 +134,9 @@ pub(in crate::optim) struct Scp<'a> {
     generation: Generation,
     /// The trust ball's multiplier in the last active-set QP.
     proximal_weight: f64,
+    /// Never accept a step from a feasible iterate to an infeasible one
+    /// ([`Scp::keeping_feasibility`]).
+    keep_feasible: bool,
 }
 
 impl<'a> Scp<'a> {
@@ -170,7 +174,19 @@ impl<'a> Scp<'a> {
             phase,
             generation: Generation::Thinned,
             proximal_weight: 0.0,
+            keep_feasible: false,
         }
+    }
+
+    /// This run never trades feasibility for cost: from a feasible iterate
+    /// a step is accepted only onto a feasible one (the L1 merit at a small
+    /// penalty would accept a step that gains more cost than it loses
+    /// clearance). For a run from a feasible start that must stay near it
+    /// (the pinned goal start of `optim::seeds`); it may crawl along
+    /// the clearance, so give it iterations.
+    pub(in crate::optim) fn keeping_feasibility(mut self) -> Self {
+        self.keep_feasible = true;
+        self
     }
 
     /// Iterate until a step returns the answer.
@@ -361,6 +377,7 @@ impl<'a> Scp<'a> {
     fn judge(&mut self, step: Step) {
         let merit_here = self.eval.merit(self.rho);
         let trial = StepTrial {
+            problem: self.problem,
             eval: &self.eval,
             merit: merit_here,
             target: &step.sol.z,
@@ -369,6 +386,7 @@ impl<'a> Scp<'a> {
             rho: self.rho,
             predicted: step.model_here - step.sol.objective,
             ctl: self.ctl,
+            keep_feasible: self.keep_feasible,
         };
         let full_step = (&step.sol.z - &self.eval.z).norm();
         if step.sol.clarabel.is_none() {
@@ -387,7 +405,7 @@ impl<'a> Scp<'a> {
         let correction: Option<&Correction> =
             (!self.certifying() && self.eval.linear_ok && step.sol.clarabel.is_none())
                 .then_some(&correct);
-        let (accepted, alpha) = self.line_search(&trial, correction, &mut stats);
+        let (accepted, alpha) = trial.search(correction, &mut stats);
         self.stats = stats;
         tracing::debug!(
             iteration = self.stats.iterations,
@@ -522,80 +540,6 @@ impl<'a> Scp<'a> {
         self.answer(StopReason::LocalMinimum, None, Some(reason), &[])
     }
 
-    /// The step of an SCP iteration, judged on the true merit: the QP's
-    /// solution if it achieves at least 10 % of the predicted decrease;
-    /// else, with a `correction`, the second-order corrected point judged
-    /// against the same prediction (one more QP and evaluation, counted in
-    /// [`SolveStats::corrections`]); else up to [`LINE_SEARCH_HALVINGS`]
-    /// halvings of the step (each predicted to achieve at least its
-    /// fraction of the decrease: the model is convex), which are cheaper
-    /// than another QP on a smaller trust region. Returns the accepted
-    /// iterate with its predicted and actual decrease, and the step
-    /// fraction tried last (1 for the corrected point).
-    fn line_search(
-        &self,
-        trial: &StepTrial,
-        correction: Option<&Correction>,
-        stats: &mut SolveStats,
-    ) -> (Option<(GridEval, f64, f64)>, f64) {
-        let StepTrial {
-            eval,
-            merit: merit_here,
-            target,
-            rows,
-            centre,
-            rho,
-            predicted,
-            ctl,
-        } = *trial;
-        let scale = 1.0 + merit_here.abs();
-        // Halving keeps the hard (linear) rows only from a point satisfying them.
-        let halvings = if eval.linear_ok {
-            LINE_SEARCH_HALVINGS
-        } else {
-            0
-        };
-        let mut alpha = 1.0;
-        for attempt in 0..=halvings {
-            let z = if attempt == 0 {
-                target.clone()
-            } else {
-                alpha *= 0.5;
-                &eval.z + (target - &eval.z) * alpha
-            };
-            let next = timed(&mut stats.evaluation_ms, || {
-                self.problem.evaluate_grid(rows, z, centre, ctl)
-            });
-            if next.interrupted {
-                return (None, alpha);
-            }
-            let predicted = alpha * predicted;
-            let actual = merit_here - next.merit(rho);
-            if !eval.linear_ok || actual >= 0.1 * predicted.max(0.0) - 1e-12 * scale {
-                return (Some((next, predicted, actual)), alpha);
-            }
-            if attempt > 0 {
-                continue;
-            }
-            let Some(z) = correction.and_then(|correct| correct(&next, stats)) else {
-                continue;
-            };
-            stats.corrections.0 += 1;
-            let corrected = timed(&mut stats.evaluation_ms, || {
-                self.problem.evaluate_grid(rows, z, centre, ctl)
-            });
-            if corrected.interrupted {
-                return (None, alpha);
-            }
-            let actual = merit_here - corrected.merit(rho);
-            if actual >= 0.1 * predicted.max(0.0) - 1e-12 * scale {
-                stats.corrections.1 += 1;
-                return (Some((corrected, predicted, actual)), alpha);
-            }
-        }
-        (None, alpha)
-    }
-
     /// Add (a spread-out subset of) the phases dense verification flagged
     /// to the optimisation phases; returns how many were new.
     fn add_flagged(&mut self, v: &Verification) -> usize {
@@ -673,27 +617,3 @@ impl<'a> Scp<'a> {
 
 /// Most phases added per dense verification round.
 const MAX_ADDED_PER_ROUND: usize = 64;
-
-/// Halvings of a rejected QP step tried before the trust region shrinks
-/// (2 cut the SCP iterations on the typical benchmark by 17 % with the
-/// same statuses; more traded statuses for iterations).
-const LINE_SEARCH_HALVINGS: usize = 2;
-
-/// A second-order correction: the corrected step's end (whitened) for a
-/// rejected trial point, from the QP with that point's short pairs added.
-type Correction<'c> = dyn Fn(&GridEval, &mut SolveStats) -> Option<DVector<f64>> + 'c;
-
-/// One QP step to judge: from `eval` towards `target` (whitened).
-struct StepTrial<'a> {
-    eval: &'a GridEval,
-    /// `eval`'s merit at penalty `rho`.
-    merit: f64,
-    target: &'a DVector<f64>,
-    rows: &'a PhaseRows,
-    centre: &'a DVector<f64>,
-    rho: f64,
-    /// The model's predicted merit decrease for the whole step.
-    predicted: f64,
-    /// The caller's stop: an interrupted trial is never accepted.
-    ctl: &'a SolveControl,
-}

@@ -16,6 +16,7 @@
 //! trajectory of the prior through them).
 
 use crate::optim::problem::Problem;
+use crate::optim::seeds::condition::{condition, Observation};
 use crate::optim::solution::SolveControl;
 use crate::optim::tolerances::CLEARANCE_BUFFER_M;
 use crate::scene::Clearance;
@@ -27,10 +28,6 @@ const DETOUR_MARGIN_M: f64 = 0.01;
 /// Damping (m²) of the least-squares step from a point displacement to a
 /// configuration change.
 const DAMPING: f64 = 1e-4;
-
-/// Observation noise (rad²) of the via-point conditioning: keeps the Gram
-/// matrix of the three configurations invertible when they are dependent.
-const CONDITIONING_NOISE: f64 = 1e-9;
 
 impl Problem {
     /// Up to `n` whitened starts that detour around the obstacles the prior
@@ -94,30 +91,18 @@ impl Problem {
     /// is the mean's plus `dq` and whose configurations at both ends are the
     /// mean's: the prior conditioned on those three configurations.
     fn conditioned_start(&self, p: usize, dq: &DVector<f64>) -> Option<DVector<f64>> {
-        let parts = [
-            self.ends.position_jacobian(0),
-            self.grid.position_jacobian(p),
-            self.ends.position_jacobian(1),
-        ];
-        let n_joints = dq.len();
-        let dim = self.whitening.dim();
-        let a = DMatrix::from_fn(3 * n_joints, dim, |r, c| {
-            parts[r / n_joints][(r % n_joints, c)]
-        });
-        let b = DVector::from_fn(3 * n_joints, |r, _| {
-            if r / n_joints == 1 {
-                dq[r % n_joints]
-            } else {
-                0.0
-            }
-        });
-        let mut gram = &a * a.transpose();
-        for i in 0..gram.nrows() {
-            gram[(i, i)] += CONDITIONING_NOISE;
-        }
-        let y = gram.cholesky()?.solve(&b);
-        let z = a.transpose() * y;
-        z.iter().all(|v| v.is_finite()).then_some(z)
+        let at_mean = |jacobian: DMatrix<f64>| Observation {
+            jacobian,
+            offset: DVector::zeros(dq.len()),
+        };
+        condition(&[
+            at_mean(self.ends.position_jacobian(0)),
+            Observation {
+                jacobian: self.grid.position_jacobian(p),
+                offset: dq.clone(),
+            },
+            at_mean(self.ends.position_jacobian(1)),
+        ])
     }
 }
 
@@ -135,6 +120,7 @@ fn damped_step(jacobian: &Matrix3xX<f64>, dx: &Vector3<f64>) -> DVector<f64> {
 mod tests {
     use super::*;
     use crate::fixtures::{typical_request, ExampleSettings};
+    use crate::optim::seeds::condition::CONDITIONING_NOISE;
     use crate::robot::Robot;
 
     /// The conditioned start is the regularised minimum-norm solution of

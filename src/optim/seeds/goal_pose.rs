@@ -320,7 +320,7 @@ impl Problem {
     }
 
     /// The prior mean's final configuration.
-    fn prior_mean_final(&self) -> Vec<f64> {
+    pub(super) fn prior_mean_final(&self) -> Vec<f64> {
         let mean = self
             .whitening
             .weights(&DVector::zeros(self.whitening.dim()));
@@ -353,19 +353,7 @@ fn step_within_limits(q: &mut [f64], dq: &DVector<f64>, linear: &LinearSet) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::optim::OptimizeRequest;
-    use crate::robot::Robot;
-
-    /// A committed real-prior problem whose berry touches the hand at the
-    /// prior mean's final pose.
-    fn problem_from_file(name: &str) -> Problem {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("problems/hard-real")
-            .join(name);
-        let file = crate::bench::ProblemFile::load(&path).unwrap();
-        let request: OptimizeRequest = serde_json::from_value(file.request).unwrap();
-        request.validate(&Robot::panda().unwrap()).unwrap()
-    }
+    use crate::optim::seeds::test_problems::real_problem;
 
     /// The unculled exact clearance of `q` to every obstacle.
     fn exact_clearance(p: &Problem, q: &[f64]) -> f64 {
@@ -383,7 +371,7 @@ mod tests {
     #[test]
     fn the_goal_configuration_reaches_the_goal_clear_of_the_berry_the_mean_pose_touches() {
         for name in ["real-016.json", "real-027.json", "real-046.json"] {
-            let p = problem_from_file(name);
+            let p = real_problem(name);
             let mean = p.whitening.weights(&DVector::zeros(p.whitening.dim()));
             let mean_final = p.ends.position(1, &mean);
             assert!(exact_clearance(&p, &mean_final) < p.clearance_m, "{name}");
@@ -408,7 +396,7 @@ mod tests {
     /// TCP stays within a millimetre of the goal.
     #[test]
     fn the_push_raises_the_clearance_and_keeps_the_tcp() {
-        let p = problem_from_file("real-016.json");
+        let p = real_problem("real-016.json");
         let mean = p.whitening.weights(&DVector::zeros(p.whitening.dim()));
         let start = p.ends.position(1, &mean);
         let target = IkTarget {

@@ -10,12 +10,16 @@
 //! So [`Problem::solve`] restarts `options.restarts` times, still
 //! minimising the distance to the prior mean: first, when the planner
 //! applies (the start fixed, the end a configuration or a goal position)
-//! and the mean collides, from a second collision-free path
+//! and the mean collides, from a feasible trajectory that ends at a clear
+//! configuration of the goal region (for a goal position, [`super::pinned`])
+//! and from a second collision-free path
 //! (the planner of [`super::path`] on another random stream than the global
 //! stage's), then from detours around the
 //! obstacles that block the mean (the prior conditioned to pass each on its
 //! near or far side, [`super::detour`]), then from draws `z ~ N(0, I)` of
-//! the whitened prior (seeded by `options.seed`) to make up the number.
+//! the whitened prior (seeded by `options.seed`) to make up the number: the
+//! best of [`SCREENED_DRAWS`] draws scored on the optimisation phases
+//! ([`super::screen`]).
 //!
 //! The restarts race ([`Problem::race`]): they advance together in rounds
 //! of [`RACE_ROUND`] iterations, in parallel within a round, and the race
@@ -44,6 +48,7 @@
 use crate::optim::problem::Problem;
 use crate::optim::report::Status;
 use crate::optim::scp::{Progress, Scp};
+use crate::optim::seeds::screen::SCREENED_DRAWS;
 use crate::optim::solution::{Solution, SolveControl, SolveStats};
 use crate::Result;
 use nalgebra::DVector;
@@ -54,6 +59,8 @@ use rayon::prelude::*;
 pub use crate::optim::task::MAX_RESTARTS;
 /// Iteration limit of one restart (less when `options.max_iterations` is).
 pub const RESTART_MAX_ITERATIONS: usize = 40;
+/// What the restarts start from, in order, as the warnings name them.
+const RESTART_KINDS: &str = "when the mean collides, a feasible trajectory ending at a clear goal configuration and a second planned path; detours around the blocking obstacles; then screened prior draws";
 /// Mixed into `options.seed` so that the restart draws are not the
 /// `samples` draws.
 const RESTART_STREAM: u64 = 0x7e57_a275;
@@ -77,11 +84,10 @@ impl Problem {
         if first.status != Status::MaxIterations || restarts == 0 || ctl.stop_reason().is_some() {
             return Ok(first);
         }
+        let began = std::time::Instant::now();
         let starts = self.restart_starts(restarts, ctl);
         let mean = DVector::zeros(self.whitening.dim());
-        let cap = self.options.max_iterations.min(RESTART_MAX_ITERATIONS);
-        let began = std::time::Instant::now();
-        let race = self.race(&starts, &mean, cap, ctl);
+        let race = self.race(&starts, &mean, ctl);
         let mut spent = Spent::from(&first);
         spent.solve_ms += began.elapsed().as_secs_f64() * 1e3;
         for stats in &race.unfinished {
@@ -96,7 +102,7 @@ impl Problem {
         match (best, stopped) {
             (Some((k, sol)), _) => {
                 let mut note = format!(
-                    "the run from the prior mean found no feasible solution ({}); of {restarts} restarts (detours around the blocking obstacles, then seeded prior draws), restart {} found the closest feasible one: a local optimum, a feasible solution closer to the prior may exist",
+                    "the run from the prior mean found no feasible solution ({}); of {restarts} restarts ({RESTART_KINDS}), restart {} found the closest feasible one: a local optimum, a feasible solution closer to the prior may exist",
                     first.reason.as_deref().unwrap_or("no reason given"),
                     k + 1
                 );
@@ -113,15 +119,15 @@ impl Problem {
             }
             (None, None) => {
                 let note = format!(
-                    "{restarts} restarts (detours around the blocking obstacles, then seeded prior draws) found no feasible solution either"
+                    "{restarts} restarts ({RESTART_KINDS}) found no feasible solution either"
                 );
                 Ok(spent.onto(first, note))
             }
         }
     }
 
-    /// The runs from `starts` towards `centre` (each of at most `cap`
-    /// iterations), advanced together in rounds of [`RACE_ROUND`]
+    /// The runs from `starts` towards `centre` (each of at most its
+    /// start's cap of iterations), advanced together in rounds of [`RACE_ROUND`]
     /// iterations each (in parallel within a round) until the end of the
     /// first round in which one of them is `optimal`, or until every run
     /// has ended or been stopped as hopeless ([`stop_hopeless`]). Which
@@ -130,12 +136,19 @@ impl Problem {
     /// count.
     pub(super) fn race(
         &self,
-        starts: &[DVector<f64>],
+        starts: &[RestartStart],
         centre: &DVector<f64>,
-        cap: usize,
         ctl: &SolveControl,
     ) -> Race {
-        let lane = |start| Lane::Running(Box::new(Scp::new(self, start, centre, cap, ctl)));
+        let lane = |start: &RestartStart| {
+            let scp = Scp::new(self, &start.z, centre, start.cap, ctl);
+            let scp = if start.keep_feasible {
+                scp.keeping_feasibility()
+            } else {
+                scp
+            };
+            Lane::Running(Box::new(scp))
+        };
         let lanes: Vec<Lane> = if ctl.parallel() {
             starts.par_iter().map(lane).collect()
         } else {
@@ -194,32 +207,58 @@ pub(super) fn race_lanes(mut lanes: Vec<Lane>, ctl: &SolveControl) -> Race {
 }
 
 impl Problem {
-    /// The `n` restart starts: a second planned path's seed when the mean
-    /// collides and one is found ([`Problem::path_start`], attempt 1), the
+    /// The `n` restart starts: when the mean collides, the pinned goal
+    /// start ([`Problem::pinned_goal_start`], a feasible trajectory kept
+    /// feasible, which may take the whole iteration limit) and a second planned path's seed
+    /// ([`Problem::path_start`], attempt 1) where they are found; the
     /// detours around the obstacles that block the prior mean
-    /// ([`Problem::detour_starts`]), then draws to make up the number.
-    fn restart_starts(&self, n: usize, ctl: &SolveControl) -> Vec<DVector<f64>> {
+    /// ([`Problem::detour_starts`]); then screened draws
+    /// ([`Problem::screened_draws`]) to make up the number. Every start but
+    /// the pinned one may take [`RESTART_MAX_ITERATIONS`].
+    fn restart_starts(&self, n: usize, ctl: &SolveControl) -> Vec<RestartStart> {
         let zero = DVector::zeros(self.whitening.dim());
-        let mut starts: Vec<DVector<f64>> = if self.mean_collides(&zero, ctl) {
-            let never = std::sync::atomic::AtomicBool::new(false);
-            self.path_start(ctl, &never, 1).into_iter().collect()
-        } else {
-            Vec::new()
+        let cap = self.options.max_iterations.min(RESTART_MAX_ITERATIONS);
+        let capped = |z| RestartStart {
+            z,
+            cap,
+            keep_feasible: false,
         };
-        starts.extend(self.detour_starts(n - starts.len(), ctl));
-        let draws = self.restart_draws(n);
-        starts.extend(draws.into_iter().take(n - starts.len()));
+        let mut starts: Vec<RestartStart> = Vec::new();
+        if self.mean_collides(&zero, ctl) {
+            starts.extend(self.pinned_goal_start(ctl).map(|z| RestartStart {
+                z,
+                cap: self.options.max_iterations,
+                keep_feasible: true,
+            }));
+            let never = std::sync::atomic::AtomicBool::new(false);
+            starts.extend(self.path_start(ctl, &never, 1).map(capped));
+        }
+        starts.truncate(n);
+        let detours = self.detour_starts(n - starts.len(), ctl);
+        starts.extend(detours.into_iter().map(capped));
+        let draws = self.restart_draws(n.max(SCREENED_DRAWS));
+        let kept = self.screened_draws(draws, n - starts.len(), ctl);
+        starts.extend(kept.into_iter().map(capped));
         starts
     }
 
     /// `n` draws `z ~ N(0, I)` of the whitened prior from `options.seed`.
-    fn restart_draws(&self, n: usize) -> Vec<DVector<f64>> {
+    pub(super) fn restart_draws(&self, n: usize) -> Vec<DVector<f64>> {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(self.options.seed ^ RESTART_STREAM);
         let dim = self.whitening.dim();
         (0..n)
             .map(|_| DVector::from_fn(dim, |_, _| StandardNormal.sample(&mut rng)))
             .collect()
     }
+}
+
+/// Where a restart starts (whitened weights), how many iterations it may
+/// take, and whether it keeps a feasible iterate feasible
+/// ([`Scp::keeping_feasibility`]).
+pub(super) struct RestartStart {
+    pub(super) z: DVector<f64>,
+    pub(super) cap: usize,
+    pub(super) keep_feasible: bool,
 }
 
 /// The index of the closest `optimal` run among `runs` (lowest Mahalanobis
@@ -413,10 +452,9 @@ mod tests {
         let starts = p.restart_starts(p.options.restarts, &ctl);
         assert!(starts.len() >= 2);
         let mean = DVector::zeros(p.whitening.dim());
-        let cap = p.options.max_iterations.min(RESTART_MAX_ITERATIONS);
         let full: Vec<Solution> = starts
             .iter()
-            .map(|s| p.run(s, &mean, cap, &ctl).unwrap())
+            .map(|s| p.run(&s.z, &mean, s.cap, &ctl).unwrap())
             .collect();
         let round_of = |s: &Solution| s.stats.iterations.max(1).div_ceil(RACE_ROUND);
         let first_round = full
@@ -439,7 +477,7 @@ mod tests {
         let answer = p.restart_if_stuck(first, &ctl).unwrap();
         assert_eq!(answer.status, Status::Optimal);
         assert_eq!(answer.weights, full[expected].weights);
-        let race = p.race(&starts, &mean, cap, &ctl);
+        let race = p.race(&starts, &mean, &ctl);
         let picked = race.finished[expected].as_ref().expect("the pick finished");
         assert_eq!(picked.weights, full[expected].weights);
         for (k, run) in race.finished.iter().enumerate() {
