@@ -128,6 +128,36 @@ fn the_deadline_stops_every_thread_of_the_request() {
 }
 
 #[test]
+fn a_request_whose_qps_hold_thousands_of_rows_stops_by_its_deadline() {
+    // A free start, a goal 0.3 m from the prior's and a duration of 1 ms:
+    // no proof of infeasibility applies, every sample breaks its jerk
+    // limits (a 4 s motion squeezed into 1 ms), and each QP holds
+    // thousands of rows, so one QP can outlast the time left. The solver
+    // stops inside a QP, so the answer is the solve's own (200, the
+    // deadline's warning), not the grace period's 503, and it comes well
+    // within the grace period.
+    let deadline = Duration::from_millis(400);
+    let server = start(test_config().with_deadline(deadline));
+    let settings = dpmp::fixtures::ExampleSettings {
+        with_start: false,
+        ..Default::default()
+    };
+    let mut v = typical_json(3, &settings);
+    v["duration_s"] = json!(0.001);
+    v["obstacles"] = json!([]);
+    v["goal"] = json!({"position": [0.3, 0.3, 0.4], "tolerance_m": 0.005});
+    let t0 = Instant::now();
+    let (status, answer) = post_json(&client(), &server.url("/v1/optimize"), v.to_string());
+    let answered = t0.elapsed();
+    assert_eq!(status, 200, "{answer}");
+    assert_eq!(answer["stop_reason"], "deadline", "{answer}");
+    assert!(
+        answered < deadline + dpmp::service::limits::GRACE / 2,
+        "answered after {answered:?}"
+    );
+}
+
+#[test]
 fn a_too_short_duration_is_proven_infeasible_at_once() {
     let server = start(test_config());
     let mut v = typical_json(1, &Default::default());

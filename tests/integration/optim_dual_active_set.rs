@@ -5,7 +5,7 @@
 //! the factor updates, incompatible hard rows.
 
 use dpmp::optim::qp::dual_active_set::{self as das, Failure, Row, Settings, WarmStart};
-use dpmp::optim::qp::{Inequality, Qp, QpSettings};
+use dpmp::optim::qp::{Inequality, Qp, QpFailure, QpSettings};
 use nalgebra::DVector;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -44,10 +44,9 @@ fn random_problem(seed: u64) -> (DVector<f64>, Vec<Row>) {
     (centre, rows)
 }
 
-/// The same problem for Clarabel: `|z - c|² + Σ ρ s` is twice
-/// `½|z - c|² + Σ (ρ/2) s`, so caps are half the penalties and the
-/// multipliers half Clarabel's duals.
-fn clarabel_solve(centre: &DVector<f64>, rows: &[Row]) -> dpmp::optim::qp::QpSolution {
+/// The problem as a [`Qp`]: `|z - c|² + Σ ρ s` is twice `½|z - c|² +
+/// Σ (ρ/2) s`, so the penalties are twice the caps.
+fn as_qp(centre: &DVector<f64>, rows: &[Row]) -> Qp {
     let mut qp = Qp::new(centre.len());
     qp.center = centre.clone();
     qp.inequalities = rows
@@ -58,6 +57,14 @@ fn clarabel_solve(centre: &DVector<f64>, rows: &[Row]) -> dpmp::optim::qp::QpSol
             penalty: r.cap.map(|u| 2.0 * u),
         })
         .collect();
+    qp
+}
+
+/// The same problem for Clarabel: `|z - c|² + Σ ρ s` is twice
+/// `½|z - c|² + Σ (ρ/2) s`, so caps are half the penalties and the
+/// multipliers half Clarabel's duals.
+fn clarabel_solve(centre: &DVector<f64>, rows: &[Row]) -> dpmp::optim::qp::QpSolution {
+    let qp = as_qp(centre, rows);
     // As tight as Clarabel reaches on the problem (it may report
     // insufficient progress below 1e-10 on the near-parallel rows).
     [1e-11, 1e-10, 1e-9]
@@ -276,4 +283,35 @@ fn bad_input_is_named() {
         cap: None,
     }];
     assert!(das::solve(&centre, &rows, &Settings::default(), &WarmStart::default()).is_err());
+}
+
+#[test]
+fn a_deadline_passed_stops_both_solvers_before_any_work() {
+    // A problem with broken rows (so the solve has steps to take), under a
+    // deadline already past: the active-set method stops at its first
+    // step, Clarabel before its set-up; without the deadline both solve it.
+    let (centre, rows) = (0..)
+        .map(random_problem)
+        .find(|(c, rows)| rows.iter().any(|r| r.a.dot(c) > r.b + 1e-3))
+        .unwrap();
+    let past = Some(std::time::Instant::now());
+    let settings = Settings {
+        deadline: past,
+        ..Settings::default()
+    };
+    let err = das::solve(&centre, &rows, &settings, &WarmStart::default()).unwrap_err();
+    assert_eq!(err, Failure::OutOfTime);
+    assert!(das::solve(&centre, &rows, &Settings::default(), &WarmStart::default()).is_ok());
+
+    let qp = as_qp(&centre, &rows);
+    let warm = WarmStart::default();
+    let stopped = qp.solve_active_set(&warm, 0.0, past);
+    assert!(matches!(stopped, Err(QpFailure::OutOfTime)), "{stopped:?}");
+    assert!(qp.solve_active_set(&warm, 0.0, None).is_ok());
+    let out_of_time = QpSettings {
+        time_limit: Some(0.0),
+        ..QpSettings::default()
+    };
+    let stopped = qp.solve(&out_of_time);
+    assert!(matches!(stopped, Err(QpFailure::OutOfTime)), "{stopped:?}");
 }

@@ -27,6 +27,7 @@ use crate::optim::qp::nullspace::NullSpace;
 use crate::optim::qp::{Cone, Qp, QpFailure, QpSolution};
 use crate::optim::tolerances::{CONE_TOLERANCE, TRUST_FILL, TRUST_OVERSHOOT};
 use nalgebra::DVector;
+use std::time::Instant;
 
 /// Tangent cuts per cone at most.
 pub const MAX_CONE_CUTS: usize = 6;
@@ -48,18 +49,20 @@ impl Qp {
     /// Solve with the dual active-set method (see the module docs). `warm`:
     /// a guess of the row states by inequality index (e.g. the previous
     /// generation round's). The duals are on Clarabel's scale (`|z - c|² + Σρ s`).
+    /// Past `deadline` it fails with [`QpFailure::OutOfTime`].
     pub fn solve_active_set(
         &self,
         warm: &das::WarmStart,
         mu_hint: f64,
+        deadline: Option<Instant>,
     ) -> Result<QpSolution, QpFailure> {
         if self.equalities.is_empty() {
-            return self.solve_active_set_free(warm, mu_hint);
+            return self.solve_active_set_free(warm, mu_hint, deadline);
         }
         let space = NullSpace::new(&self.equalities, self.dim()).ok_or(QpFailure::Infeasible)?;
         let mut sol = self
             .restricted_to(&space)
-            .solve_active_set_free(warm, mu_hint)?;
+            .solve_active_set_free(warm, mu_hint, deadline)?;
         sol.z = space.lift(&sol.z);
         sol.objective += space.distance_squared(&self.center);
         Ok(sol)
@@ -69,6 +72,7 @@ impl Qp {
         &self,
         warm: &das::WarmStart,
         mu_hint: f64,
+        deadline: Option<Instant>,
     ) -> Result<QpSolution, QpFailure> {
         let reference = self.trust.as_ref().map_or(&self.center, |(c, _)| c);
         let mut cuts: Vec<Row> = self
@@ -80,7 +84,7 @@ impl Qp {
         let mut mu = mu_hint;
         let mut steps = 0;
         loop {
-            let inner = self.proximal_solve(&cuts, warm, mu, &mut steps)?;
+            let inner = self.proximal_solve(&cuts, warm, mu, deadline, &mut steps)?;
             let broken: Vec<Row> = self
                 .cones
                 .iter()
@@ -134,12 +138,14 @@ impl Qp {
         cuts: &[Row],
         warm: das::WarmStart,
         mu_hint: f64,
+        deadline: Option<Instant>,
         steps: &mut usize,
     ) -> Result<Proximal, QpFailure> {
         let rows = self.active_set_rows(cuts);
         let mut solve_at = |mu: f64, warm: &das::WarmStart| -> Result<Proximal, QpFailure> {
             let settings = das::Settings {
                 cap_scale: cap_scale(mu),
+                deadline,
                 ..das::Settings::default()
             };
             let sol = das::solve(&self.proximal_centre(mu), &rows, &settings, warm)
@@ -307,6 +313,7 @@ fn active_set_failure(f: das::Failure) -> QpFailure {
     match f {
         das::Failure::Infeasible { .. } => QpFailure::Infeasible,
         das::Failure::MaxSteps => QpFailure::Numerical("active set: step limit reached".into()),
+        das::Failure::OutOfTime => QpFailure::OutOfTime,
         das::Failure::BadInput(what) => QpFailure::Numerical(format!("active set: {what}")),
     }
 }

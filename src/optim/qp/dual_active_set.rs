@@ -51,6 +51,7 @@
 //! from the multipliers after every row, not accumulated.
 
 use nalgebra::{DMatrix, DVector};
+use std::time::Instant;
 
 /// A normal whose part outside the span of the active normals is below this
 /// fraction of its length is treated as lying in that span.
@@ -82,6 +83,10 @@ pub struct Settings {
     /// family of problems whose objective is scaled (the SCP's proximal
     /// trust term), without copying them.
     pub cap_scale: f64,
+    /// Give up ([`Failure::OutOfTime`]) at the first step begun after this
+    /// instant: a solve over thousands of rows takes thousands of steps, and
+    /// a request's deadline bounds all of its work.
+    pub deadline: Option<Instant>,
 }
 
 impl Default for Settings {
@@ -91,6 +96,7 @@ impl Default for Settings {
             max_steps: 0,
             refactor_every: 64,
             cap_scale: 1.0,
+            deadline: None,
         }
     }
 }
@@ -106,6 +112,8 @@ pub enum Failure {
     },
     /// The step limit was reached (cycling or a badly scaled problem).
     MaxSteps,
+    /// [`Settings::deadline`] passed.
+    OutOfTime,
     /// A row or the centre has the wrong length or a non-finite entry.
     BadInput(String),
 }
@@ -366,6 +374,9 @@ impl<'a> DualActiveSet<'a> {
             self.steps += 1;
             if self.steps > self.max_steps {
                 return Err(Failure::MaxSteps);
+            }
+            if self.settings.deadline.is_some_and(|d| Instant::now() >= d) {
+                return Err(Failure::OutOfTime);
             }
             let (d, dependent) = self.rotated(&normal);
             let k = self.active.len();

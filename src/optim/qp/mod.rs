@@ -273,6 +273,11 @@ impl Qp {
         settings: &QpSettings,
     ) -> std::result::Result<QpSolution, QpFailure> {
         debug_assert!(self.equalities.is_empty());
+        // Clarabel checks its time limit between interior-point iterations,
+        // not while it sets up: a deadline already past stops here.
+        if settings.time_limit.is_some_and(|t| t <= 0.0) {
+            return Err(QpFailure::OutOfTime);
+        }
         let layout = SlackLayout::of(self);
         let q = self.linear_cost(&layout);
         let (a, b, cones) = self.constraints(&layout);

@@ -69,16 +69,16 @@ impl Problem {
         }
         let model_here = at.eval.cost + at.rho * model_slack;
         self.first_working_set(&mut work, at, hint, target);
-        let settings = QpSettings {
-            tolerance: self.options.qp_tolerance,
-            time_limit: ctl.seconds_left(),
-            ..Default::default()
-        };
         let mut round = 0;
         let mut warm = work.carried_states(hint);
         let mut mu = at.proximal_hint;
         loop {
             round += 1;
+            let settings = QpSettings {
+                tolerance: self.options.qp_tolerance,
+                time_limit: ctl.seconds_left(),
+                ..Default::default()
+            };
             let sol = if at.certify {
                 timed(&mut stats.clarabel_ms, || {
                     certifying_solve(&work.qp, &settings)
@@ -86,7 +86,7 @@ impl Problem {
             } else {
                 // Infeasibility is a proof: Clarabel (the solver of record)
                 // confirms what the active-set method reports.
-                match work.qp.solve_active_set(&warm, mu) {
+                match work.qp.solve_active_set(&warm, mu, ctl.deadline) {
                     Err(QpFailure::Infeasible) => timed(&mut stats.clarabel_ms, || {
                         certifying_solve(&work.qp, &settings)
                     })?,
