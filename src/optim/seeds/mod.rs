@@ -3,7 +3,8 @@
 //! configuration of the goal region ([`goal_pose`]), raced against the mean from the first
 //! iteration when the mean is blocked ([`global`]); [`restart`]s from
 //! a feasible trajectory ending at a clear goal configuration
-//! ([`pinned`]), from detours around the obstacles that block the mean and from seeded prior
+//! ([`pinned`]), from a second planned path made feasible near itself
+//! ([`near_path`]), from detours around the obstacles that block the mean and from seeded prior
 //! draws after a local minimum, the draws [`screen`]ed for the closest to
 //! feasible; and the `samples: N` projected draws of
 //! [`sampling`].
@@ -12,6 +13,7 @@ mod condition;
 mod detour;
 pub mod global;
 pub mod goal_pose;
+mod near_path;
 pub mod path;
 mod pinned;
 pub mod restart;

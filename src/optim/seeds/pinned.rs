@@ -24,7 +24,6 @@
 //!    iteration limit.
 
 use crate::optim::problem::Problem;
-use crate::optim::report::Status;
 use crate::optim::seeds::restart::RESTART_MAX_ITERATIONS;
 use crate::optim::solution::SolveControl;
 use nalgebra::DVector;
@@ -44,17 +43,14 @@ impl Problem {
         pinned.linear.final_configuration = Some(goal);
         let zero = DVector::zeros(start.len());
         let cap = self.options.max_iterations.min(RESTART_MAX_ITERATIONS);
-        let run = pinned.run(&start, &zero, cap, ctl).ok()?;
-        (run.status == Status::Optimal).then(|| {
-            self.whitening
-                .whiten(&DVector::from_column_slice(&run.weights))
-        })
+        self.optimal_start(pinned.run(&start, &zero, cap, ctl))
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::optim::report::Status;
     use crate::optim::scp::Scp;
     use crate::optim::seeds::test_problems::real_problem;
 

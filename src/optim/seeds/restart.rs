@@ -12,9 +12,9 @@
 //! applies (the start fixed, the end a configuration or a goal position)
 //! and the mean collides, from a feasible trajectory that ends at a clear
 //! configuration of the goal region (for a goal position, [`super::pinned`])
-//! and from a second collision-free path
-//! (the planner of [`super::path`] on another random stream than the global
-//! stage's), then from detours around the
+//! and from a second collision-free path (the planner of [`super::path`] on
+//! another random stream than the global stage's), made feasible near
+//! itself first when it can be ([`super::near_path`]), then from detours around the
 //! obstacles that block the mean (the prior conditioned to pass each on its
 //! near or far side, [`super::detour`]), then from draws `z ~ N(0, I)` of
 //! the whitened prior (seeded by `options.seed`) to make up the number: the
@@ -60,7 +60,7 @@ pub use crate::optim::task::MAX_RESTARTS;
 /// Iteration limit of one restart (less when `options.max_iterations` is).
 pub const RESTART_MAX_ITERATIONS: usize = 40;
 /// What the restarts start from, in order, as the warnings name them.
-const RESTART_KINDS: &str = "when the mean collides, a feasible trajectory ending at a clear goal configuration and a second planned path; detours around the blocking obstacles; then screened prior draws";
+const RESTART_KINDS: &str = "when the mean collides, a feasible trajectory ending at a clear goal configuration and a second planned path, made feasible near itself; detours around the blocking obstacles; then screened prior draws";
 /// Mixed into `options.seed` so that the restart draws are not the
 /// `samples` draws.
 const RESTART_STREAM: u64 = 0x7e57_a275;
@@ -208,30 +208,23 @@ pub(super) fn race_lanes(mut lanes: Vec<Lane>, ctl: &SolveControl) -> Race {
 
 impl Problem {
     /// The `n` restart starts: when the mean collides, the pinned goal
-    /// start ([`Problem::pinned_goal_start`], a feasible trajectory kept
-    /// feasible, which may take the whole iteration limit) and a second planned path's seed
-    /// ([`Problem::path_start`], attempt 1) where they are found; the
-    /// detours around the obstacles that block the prior mean
-    /// ([`Problem::detour_starts`]); then screened draws
-    /// ([`Problem::screened_draws`]) to make up the number. Every start but
-    /// the pinned one may take [`RESTART_MAX_ITERATIONS`].
+    /// start ([`Problem::pinned_goal_start`]) and the second planned path
+    /// ([`Problem::near_path_start`], made feasible near itself when it can
+    /// be) where they are found; the detours around the obstacles that
+    /// block the prior mean ([`Problem::detour_starts`]); then screened
+    /// draws ([`Problem::screened_draws`]) to make up the number. The
+    /// feasible starts are kept feasible ([`RestartStart::kept_feasible`]);
+    /// every other start may take [`RESTART_MAX_ITERATIONS`].
     fn restart_starts(&self, n: usize, ctl: &SolveControl) -> Vec<RestartStart> {
         let zero = DVector::zeros(self.whitening.dim());
-        let cap = self.options.max_iterations.min(RESTART_MAX_ITERATIONS);
-        let capped = |z| RestartStart {
-            z,
-            cap,
-            keep_feasible: false,
-        };
+        let capped = |z| RestartStart::capped(z, self);
         let mut starts: Vec<RestartStart> = Vec::new();
         if self.mean_collides(&zero, ctl) {
-            starts.extend(self.pinned_goal_start(ctl).map(|z| RestartStart {
-                z,
-                cap: self.options.max_iterations,
-                keep_feasible: true,
-            }));
-            let never = std::sync::atomic::AtomicBool::new(false);
-            starts.extend(self.path_start(ctl, &never, 1).map(capped));
+            starts.extend(
+                self.pinned_goal_start(ctl)
+                    .map(|z| RestartStart::kept_feasible(z, self)),
+            );
+            starts.extend(self.near_path_start(ctl));
         }
         starts.truncate(n);
         let detours = self.detour_starts(n - starts.len(), ctl);
@@ -259,6 +252,29 @@ pub(super) struct RestartStart {
     pub(super) z: DVector<f64>,
     pub(super) cap: usize,
     pub(super) keep_feasible: bool,
+}
+
+impl RestartStart {
+    /// A start of at most [`RESTART_MAX_ITERATIONS`] iterations.
+    pub(super) fn capped(z: DVector<f64>, problem: &Problem) -> Self {
+        RestartStart {
+            z,
+            cap: problem.options.max_iterations.min(RESTART_MAX_ITERATIONS),
+            keep_feasible: false,
+        }
+    }
+
+    /// A start feasible for `problem`, kept feasible, which may take the
+    /// problem's whole iteration limit: a run that never accepts an
+    /// infeasible step may crawl along the clearance for longer than one
+    /// from a draw.
+    pub(super) fn kept_feasible(z: DVector<f64>, problem: &Problem) -> Self {
+        RestartStart {
+            z,
+            cap: problem.options.max_iterations,
+            keep_feasible: true,
+        }
+    }
 }
 
 /// The index of the closest `optimal` run among `runs` (lowest Mahalanobis
