@@ -11,7 +11,7 @@
 //!
 //! 1. the SCP from the fitted path towards *the path itself* (the path is
 //!    the centre of the cost instead of the prior mean), capped at
-//!    [`RESTART_MAX_ITERATIONS`]: it only has to push the smoothed curve
+//!    [`super::restart::RESTART_MAX_ITERATIONS`]: it only has to push the smoothed curve
 //!    clear, and the nearest feasible trajectory to a nearly feasible one is
 //!    close by;
 //! 2. when that run ends `optimal`, its answer (feasible for the problem
@@ -23,11 +23,8 @@
 //! as before (capped, not kept feasible).
 
 use crate::optim::problem::Problem;
-use crate::optim::report::Status;
-use crate::optim::seeds::restart::{RestartStart, RESTART_MAX_ITERATIONS};
-use crate::optim::solution::{Solution, SolveControl};
-use crate::Result;
-use nalgebra::DVector;
+use crate::optim::seeds::restart::RestartStart;
+use crate::optim::solution::SolveControl;
 use std::sync::atomic::AtomicBool;
 
 impl Problem {
@@ -36,22 +33,10 @@ impl Problem {
     pub(super) fn near_path_start(&self, ctl: &SolveControl) -> Option<RestartStart> {
         let never = AtomicBool::new(false);
         let path = self.path_start(ctl, &never, 1)?;
-        let cap = self.options.max_iterations.min(RESTART_MAX_ITERATIONS);
-        let near = self.run(&path, &path, cap, ctl);
+        let near = self.run(&path, &path, self.restart_cap(), ctl);
         Some(match self.optimal_start(near) {
             Some(z) => RestartStart::kept_feasible(z, self),
             None => RestartStart::capped(path, self),
-        })
-    }
-
-    /// The whitened weights of `run`'s answer when it ended `optimal`: a
-    /// start feasible for this problem (the run was of this problem, or of
-    /// one whose constraints include its own).
-    pub(super) fn optimal_start(&self, run: Result<Solution>) -> Option<DVector<f64>> {
-        let run = run.ok()?;
-        (run.status == Status::Optimal).then(|| {
-            self.whitening
-                .whiten(&DVector::from_column_slice(&run.weights))
         })
     }
 }
@@ -59,8 +44,10 @@ impl Problem {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::optim::report::Status;
     use crate::optim::scp::Scp;
     use crate::optim::seeds::test_problems::real_problem;
+    use nalgebra::DVector;
 
     /// On a real-prior problem whose mean collides, the second planned
     /// path's run towards itself ends `optimal`: the start is feasible for

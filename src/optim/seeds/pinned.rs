@@ -24,7 +24,6 @@
 //!    iteration limit.
 
 use crate::optim::problem::Problem;
-use crate::optim::seeds::restart::RESTART_MAX_ITERATIONS;
 use crate::optim::solution::SolveControl;
 use nalgebra::DVector;
 
@@ -42,8 +41,7 @@ impl Problem {
         let mut pinned = self.clone();
         pinned.linear.final_configuration = Some(goal);
         let zero = DVector::zeros(start.len());
-        let cap = self.options.max_iterations.min(RESTART_MAX_ITERATIONS);
-        self.optimal_start(pinned.run(&start, &zero, cap, ctl))
+        self.optimal_start(pinned.run(&start, &zero, self.restart_cap(), ctl))
     }
 }
 

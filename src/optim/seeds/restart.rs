@@ -254,12 +254,32 @@ pub(super) struct RestartStart {
     pub(super) keep_feasible: bool,
 }
 
+impl Problem {
+    /// Iteration limit of a restart that is not kept feasible, and of the
+    /// runs that make a feasible start: [`RESTART_MAX_ITERATIONS`], less
+    /// when `options.max_iterations` is.
+    pub(super) fn restart_cap(&self) -> usize {
+        self.options.max_iterations.min(RESTART_MAX_ITERATIONS)
+    }
+
+    /// The whitened weights of `run`'s answer when it ended `optimal`: a
+    /// start feasible for this problem (the run was of this problem, or of
+    /// one whose constraints include its own).
+    pub(super) fn optimal_start(&self, run: Result<Solution>) -> Option<DVector<f64>> {
+        let run = run.ok()?;
+        (run.status == Status::Optimal).then(|| {
+            self.whitening
+                .whiten(&DVector::from_column_slice(&run.weights))
+        })
+    }
+}
+
 impl RestartStart {
     /// A start of at most [`RESTART_MAX_ITERATIONS`] iterations.
     pub(super) fn capped(z: DVector<f64>, problem: &Problem) -> Self {
         RestartStart {
             z,
-            cap: problem.options.max_iterations.min(RESTART_MAX_ITERATIONS),
+            cap: problem.restart_cap(),
             keep_feasible: false,
         }
     }
