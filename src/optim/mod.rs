@@ -16,6 +16,10 @@
 //!   [`problem::phases`] (joint positions and their time derivatives as rows
 //!   in `z` per phase), [`problem::linear`] (limit rows, end conditions,
 //!   opt-in weight bounds).
+//! - `constraints` — the constraints at single phases (the goal's position
+//!   and approach, the tolerant waypoints), one kind per file behind the
+//!   `EndConstraint` trait that the SCP, the subproblem and the
+//!   verification call alike.
 //! - [`infeasible`] — proofs before any solve that a request cannot be met:
 //!   the joint-space diagnosis and the closed-form duration bound.
 //! - [`scp`] — the sequential convex programme: its entry points, the
@@ -42,6 +46,7 @@
 //! the wall-clock `solve_ms` fields.
 
 pub mod auto_duration;
+mod constraints;
 pub mod infeasible;
 pub mod problem;
 pub mod qp;

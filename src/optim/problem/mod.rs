@@ -6,6 +6,7 @@ pub mod linear;
 pub mod phases;
 pub mod whiten;
 
+use crate::optim::constraints::EndConstraint;
 use crate::optim::problem::linear::LinearSet;
 use crate::optim::problem::phases::PhaseRows;
 use crate::optim::problem::whiten::Whitening;
@@ -14,7 +15,8 @@ use crate::optim::tolerances::FEASIBILITY_TOLERANCE;
 use crate::promp::{Basis, WeightDistribution};
 use crate::robot::Robot;
 use crate::scene::Scene;
-use nalgebra::{DMatrix, DVector, Vector3};
+use nalgebra::{DMatrix, DVector};
+use std::sync::Arc;
 
 /// A validated request: prior, whitening, robot, scene and constraints.
 /// `Clone + Send + Sync`; solving does not mutate it.
@@ -37,10 +39,9 @@ pub struct Problem {
     pub(crate) clearance_m: f64,
     pub(crate) activation_m: f64,
     pub(crate) goal: Option<Goal>,
-    /// The TCP positions of the request's position waypoints.
-    pub(crate) via_positions: Vec<ViaPosition>,
-    /// The request's configuration waypoints with a tolerance.
-    pub(crate) via_boxes: Vec<ViaBox>,
+    /// The constraints at single phases (the goal's position and approach,
+    /// the tolerant waypoints), in the order their rows enter the QP.
+    pub(in crate::optim) end_constraints: Vec<Arc<dyn EndConstraint>>,
     pub(crate) options: SolverOptions,
     pub(crate) duration: f64,
     /// How the phase advances with time (rest-to-rest or free ends).
@@ -109,22 +110,7 @@ impl Problem {
             .into_iter()
             .chain(report.continuous_clearance_m)
             .all(|d| d >= self.clearance_m - tol);
-        let goal_ok = match (&self.goal, report.goal_error_m) {
-            (Some(g), Some(e)) => e <= g.tolerance_m + tol,
-            (Some(_), None) => false,
-            (None, _) => true,
-        };
-        let approach_ok = match (self.approach(), report.goal_angle_error_rad) {
-            (Some((_, limit)), Some(angle)) => angle <= limit + tol,
-            (Some(_), None) => false,
-            (None, _) => true,
-        };
-        let via_ok = (self.via_positions.is_empty()
-            || report.via_position_excess_m.is_some_and(|e| e <= tol))
-            && (self.via_boxes.is_empty()
-                || report
-                    .via_configuration_excess_rad
-                    .is_some_and(|e| e <= tol));
+        let ends_ok = self.end_constraints.iter().all(|c| c.holds(report, tol));
         let ratio_ok = |r: Option<f64>| r.is_none_or(|r| r <= 1.0 + tol);
         // An interrupted verification has no clearance figures: never feasible.
         let clearance_checked = self.scene.is_empty()
@@ -133,53 +119,12 @@ impl Problem {
         report.verified_samples > 0
             && clearance_checked
             && clear_ok
-            && goal_ok
-            && approach_ok
-            && via_ok
+            && ends_ok
             && report.max_joint_limit_violation_rad <= tol
             && report.max_velocity_ratio <= 1.0 + tol
             && ratio_ok(report.max_acceleration_ratio)
             && ratio_ok(report.max_jerk_ratio)
             && report.equality_error_rad <= tol
             && report.weight_bound_excess <= tol
-    }
-}
-
-/// A TCP position the trajectory passes within `tolerance_m` at one of the
-/// `ends` phases (a position waypoint of the request).
-#[derive(Clone, Debug)]
-pub(crate) struct ViaPosition {
-    /// Index in the request's `via_points`.
-    pub(crate) index: usize,
-    /// Index of its phase in the problem's `ends` rows.
-    pub(crate) ends: usize,
-    /// Target TCP position (m, base frame).
-    pub(crate) position: Vector3<f64>,
-    /// Allowed distance (m).
-    pub(crate) tolerance_m: f64,
-}
-
-/// A configuration the trajectory passes with every joint within
-/// `tolerance_rad` at one of the `ends` phases (a configuration waypoint of
-/// the request with a tolerance).
-#[derive(Clone, Debug)]
-pub(crate) struct ViaBox {
-    /// Index in the request's `via_points`.
-    pub(crate) index: usize,
-    /// Index of its phase in the problem's `ends` rows.
-    pub(crate) ends: usize,
-    /// Target joint positions (rad).
-    pub(crate) configuration: Vec<f64>,
-    /// Allowed difference per joint (rad).
-    pub(crate) tolerance_rad: f64,
-}
-
-impl ViaBox {
-    /// `Σ_j max(0, |q_j − c_j| − tolerance)` at configuration `q`.
-    pub(crate) fn excess(&self, q: &[f64], tolerance: f64) -> f64 {
-        q.iter()
-            .zip(&self.configuration)
-            .map(|(a, c)| ((a - c).abs() - tolerance).max(0.0))
-            .sum()
     }
 }

@@ -8,10 +8,11 @@ use super::{
     MAX_REQUEST_POINTS,
 };
 use crate::error::{ensure_finite, ensure_in_range as check_range, ensure_positive};
+use crate::optim::constraints::end_constraints;
 use crate::optim::problem::linear::LinearSet;
 use crate::optim::problem::phases::{PhaseRows, TimeWarp};
 use crate::optim::problem::whiten::Whitening;
-use crate::optim::problem::{Problem, ViaBox, ViaPosition};
+use crate::optim::problem::Problem;
 use crate::optim::task::{
     Boundary, Goal, SolverOptions, Waypoint, DEFAULT_ACTIVATION_MARGIN_M,
     DEFAULT_WAYPOINT_TOLERANCE_M, MAX_DURATION_S, MAX_ITERATIONS, MAX_RESTARTS, MAX_VIA_POINTS,
@@ -138,33 +139,7 @@ impl Task {
             clearance_m: self.clearance_m,
             activation_m,
             goal: self.goal.clone(),
-            via_positions: self
-                .via_points
-                .iter()
-                .enumerate()
-                .filter_map(|(i, v)| {
-                    Some(ViaPosition {
-                        index: i,
-                        ends: 2 + i,
-                        position: Vector3::from(v.position?),
-                        tolerance_m: v.tolerance_m.unwrap_or(DEFAULT_WAYPOINT_TOLERANCE_M),
-                    })
-                })
-                .collect(),
-            via_boxes: self
-                .via_points
-                .iter()
-                .enumerate()
-                .filter(|(_, v)| !v.is_exact_configuration())
-                .filter_map(|(i, v)| {
-                    Some(ViaBox {
-                        index: i,
-                        ends: 2 + i,
-                        configuration: v.configuration.clone()?,
-                        tolerance_rad: v.tolerance_rad?,
-                    })
-                })
-                .collect(),
+            end_constraints: end_constraints(self.goal.as_ref(), &self.via_points),
             options: self.options.clone(),
             duration: self.duration_s,
             warp,

@@ -3,20 +3,18 @@
 //! of rows and solved by constraint generation.
 
 use crate::optim::problem::linear::{RowKind, RowRef};
-use crate::optim::problem::phases::Derivative;
 use crate::optim::problem::phases::PhaseRows;
-use crate::optim::problem::{Problem, ViaBox};
+use crate::optim::problem::Problem;
 use crate::optim::qp::dual_active_set::WarmStart;
-use crate::optim::qp::{Cone, Inequality, Qp, QpFailure, QpSettings, QpSolution};
-use crate::optim::scp::evaluate::{GoalEval, GridEval};
+use crate::optim::qp::{Inequality, Qp, QpFailure, QpSettings, QpSolution};
+use crate::optim::scp::evaluate::GridEval;
 use crate::optim::scp::working_set::{thin_in_time, Candidate};
 use crate::optim::solution::{timed, SolveControl, SolveStats};
-use crate::optim::tolerances::{buffered_angle, buffered_tolerance};
 use crate::optim::tolerances::{
     ACTIVE_DUAL_FRACTION, CERTIFY_TIGHTENING, CLEARANCE_BAND_M, CLEARANCE_BUFFER_M,
     GENERATION_TOLERANCE,
 };
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DVector;
 use std::collections::HashSet;
 
 /// Generation rounds of clearance rows per QP while the iterate is being
@@ -45,27 +43,15 @@ impl Problem {
         let corrections = self.correction_rows(at, target, &mut clearance);
         let mut work = WorkingQp::new(self.base_qp(at), &clearance, at.rows);
         work.add_clearance(&corrections);
-        if let Some((cone, excess)) = self.goal_cone(at.eval, at.rho) {
-            work.qp.cones.push(cone);
-            model_slack += excess;
-        }
-        for (v, q) in self.via_boxes.iter().zip(&at.eval.via_boxes) {
-            for row in self.box_rows(at.eval, v, q, at.rho) {
+        for (c, e) in self.end_constraints.iter().zip(&at.eval.ends) {
+            let jacobian = self.ends.position_jacobian(c.phase());
+            let rows = c.linearise(&self.robot, &jacobian, e, &at.eval.z, at.rho);
+            work.qp.cones.extend(rows.cones);
+            for row in rows.inequalities {
                 work.qp.inequalities.push(row);
                 work.ids.push(RowId::Other);
             }
-        }
-        model_slack += at.eval.via_box_excess;
-        for (v, ve) in self.via_positions.iter().zip(&at.eval.via) {
-            work.qp
-                .cones
-                .push(self.tcp_cone(at.eval, ve, v.ends, v.tolerance_m, at.rho));
-            model_slack += ve.buffered_excess;
-        }
-        if let Some((row, excess)) = self.approach_row(at.eval, at.rho) {
-            work.qp.inequalities.push(row);
-            work.ids.push(RowId::Other);
-            model_slack += excess;
+            model_slack += e.buffered_excess;
         }
         let model_here = at.eval.cost + at.rho * model_slack;
         self.first_working_set(&mut work, at, hint, target);
@@ -249,74 +235,6 @@ impl Problem {
                 })
             })
             .collect()
-    }
-
-    /// The goal as a second-order cone linearised at `eval`, and its excess.
-    fn goal_cone(&self, eval: &GridEval, rho: f64) -> Option<(Cone, f64)> {
-        let (goal, ge) = (self.goal.as_ref()?, eval.goal.as_ref()?);
-        let cone = self.tcp_cone(eval, ge, 1, goal.tolerance_m, rho);
-        Some((cone, ge.buffered_excess))
-    }
-
-    /// `|TCP(z) − target| ≤ tolerance` at `ends` phase `p`, linearised at
-    /// `eval` (whose TCP there is `tcp`), as a second-order cone with an
-    /// L1-penalised slack.
-    fn tcp_cone(
-        &self,
-        eval: &GridEval,
-        tcp: &GoalEval,
-        p: usize,
-        tolerance: f64,
-        rho: f64,
-    ) -> Cone {
-        let j = self.robot.tcp_jacobian(&tcp.q);
-        let linear = DMatrix::from_iterator(3, j.ncols(), j.rows(0, 3).iter().cloned());
-        let g = linear * self.ends.position_jacobian(p);
-        let gz = &g * &eval.z;
-        Cone {
-            offset: DVector::from_fn(3, |i, _| tcp.residual[i] - gz[i]),
-            matrix: g,
-            radius: buffered_tolerance(tolerance),
-            penalty: rho,
-        }
-    }
-
-    /// `|q_j(z) − c_j| ≤ buffered tolerance` at a configuration waypoint,
-    /// two rows per joint (exact: a configuration is linear in `z`), each
-    /// with an L1-penalised slack; `q` is the configuration at `eval`.
-    fn box_rows(&self, eval: &GridEval, v: &ViaBox, q: &[f64], rho: f64) -> Vec<Inequality> {
-        let tolerance = buffered_angle(v.tolerance_rad);
-        let mut rows = Vec::with_capacity(2 * q.len());
-        for (j, (&qj, &cj)) in q.iter().zip(&v.configuration).enumerate() {
-            let a = self.ends.row(Derivative::Position, v.ends, j);
-            let offset = qj - a.dot(&eval.z);
-            rows.push(Inequality {
-                a: a.clone(),
-                b: cj + tolerance - offset,
-                penalty: Some(rho),
-            });
-            rows.push(Inequality {
-                a: -a,
-                b: offset - (cj - tolerance),
-                penalty: Some(rho),
-            });
-        }
-        rows
-    }
-
-    /// The approach direction linearised at `eval`,
-    /// `a·u + ∇(a·u)·(z - z_k) >= cos(buffered tolerance)` with an
-    /// L1-penalised slack, and its excess.
-    fn approach_row(&self, eval: &GridEval, rho: f64) -> Option<(Inequality, f64)> {
-        let ap = eval.goal.as_ref()?.approach.as_ref()?;
-        let g = DVector::from_column_slice(&ap.gradient);
-        let a = self.ends.position_jacobian(1).tr_mul(&g);
-        let row = Inequality {
-            b: ap.cosine - a.dot(&eval.z) - ap.target,
-            a: -a,
-            penalty: Some(rho),
-        };
-        Some((row, ap.buffered_excess))
     }
 
     /// Add `candidates` (thinned in time, scored by their excess at `w`)
@@ -583,15 +501,16 @@ mod tests {
             .all_rows(at.rows)
             .map(|r| p.linear.inequality(at.rows, &p.prior.mean, r))
             .collect();
-        qp.inequalities
-            .extend(p.approach_row(at.eval, at.rho).map(|(row, _)| row));
         qp.inequalities.extend(
             p.clearance_rows(at.rows, at.eval, target, at.rho)
                 .into_iter()
                 .map(|c| c.inequality(at.rows)),
         );
-        if let Some((cone, _)) = p.goal_cone(at.eval, at.rho) {
-            qp.cones.push(cone);
+        for (c, e) in p.end_constraints.iter().zip(&at.eval.ends) {
+            let jacobian = p.ends.position_jacobian(c.phase());
+            let rows = c.linearise(&p.robot, &jacobian, e, &at.eval.z, at.rho);
+            qp.cones.extend(rows.cones);
+            qp.inequalities.extend(rows.inequalities);
         }
         qp.trust = at.trust.map(|r| (at.eval.z.clone(), r));
         qp

@@ -110,10 +110,6 @@ impl Problem {
             max_velocity_ratio: ratio,
             max_acceleration_ratio: acceleration_ratio,
             max_jerk_ratio: jerk_ratio,
-            goal_error_m: self.goal_error(w),
-            goal_angle_error_rad: self.goal_angle_error(w),
-            via_position_excess_m: self.via_position_excess(w),
-            via_configuration_excess_rad: self.via_configuration_excess(w),
             verified_samples: if interrupted.is_some() {
                 0
             } else {
@@ -126,6 +122,10 @@ impl Problem {
                 .max(0.0),
             ..Default::default()
         };
+        for c in &self.end_constraints {
+            let q = self.ends.position(c.phase(), w);
+            c.report(&self.robot, &q, &mut report);
+        }
         let mut flagged: Vec<f64> = flagged
             .iter()
             .zip(&self.dense_phases)
@@ -251,56 +251,6 @@ impl Problem {
                 distances,
             ),
         })
-    }
-
-    /// Largest TCP distance from a position waypoint beyond its tolerance
-    /// (`None` without position waypoints).
-    pub(crate) fn via_position_excess(&self, w: &DVector<f64>) -> Option<f64> {
-        self.via_positions
-            .iter()
-            .map(|v| {
-                let q = self.ends.position(v.ends, w);
-                let p = self.robot.tcp_pose(&q).translation.vector;
-                (p - v.position).norm() - v.tolerance_m
-            })
-            .reduce(f64::max)
-    }
-
-    /// Largest joint difference from a configuration waypoint beyond its
-    /// tolerance (`None` without configuration waypoints with a tolerance).
-    pub(crate) fn via_configuration_excess(&self, w: &DVector<f64>) -> Option<f64> {
-        self.via_boxes
-            .iter()
-            .flat_map(|v| {
-                let q = self.ends.position(v.ends, w);
-                q.iter()
-                    .zip(&v.configuration)
-                    .map(|(a, c)| (a - c).abs() - v.tolerance_rad)
-                    .collect::<Vec<f64>>()
-            })
-            .reduce(f64::max)
-    }
-
-    /// TCP distance to the goal at phase 1.
-    pub(crate) fn goal_error(&self, w: &DVector<f64>) -> Option<f64> {
-        let goal = self.goal.as_ref()?;
-        let q = self.ends.position(1, w);
-        let p = self.robot.tcp_pose(&q).translation.vector;
-        Some(
-            ((p.x - goal.position[0]).powi(2)
-                + (p.y - goal.position[1]).powi(2)
-                + (p.z - goal.position[2]).powi(2))
-            .sqrt(),
-        )
-    }
-
-    /// Angle (rad) between the gripper's z axis at phase 1 and the goal's
-    /// approach axis.
-    pub(crate) fn goal_angle_error(&self, w: &DVector<f64>) -> Option<f64> {
-        let (axis, _) = self.approach()?;
-        let q = self.ends.position(1, w);
-        let z = self.robot.tcp_pose(&q).rotation * nalgebra::Vector3::z();
-        Some(z.dot(&axis).clamp(-1.0, 1.0).acos())
     }
 
     /// The trajectory of `w` on the request's grid (equal time steps),
