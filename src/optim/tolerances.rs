@@ -16,6 +16,19 @@ pub const LINEAR_TOLERANCE: f64 = 1e-7;
 /// short of the requirement.
 pub const CLEARANCE_BUFFER_M: f64 = 2e-4;
 
+/// Largest extra clearance (m) the optimiser keeps at a phase where the
+/// verification found the trajectory too close between the optimisation
+/// phases: each such round raises the flagged phases' target by the
+/// deficit it measured, up to this. A corner of an obstacle passed at
+/// 0.5 m/s between phases 20 ms apart comes up to 5 mm closer than at the
+/// phases themselves.
+pub const MAX_CLEARANCE_MARGIN_M: f64 = 5e-3;
+
+/// Largest raise (m) of a phase's extra clearance in one verification
+/// round: the certificate's bound between samples can overstate how far in
+/// the trajectory comes, so a large deficit is closed over several rounds.
+pub const MAX_MARGIN_STEP_M: f64 = 1e-3;
+
 /// Goal tolerance the QP aims for: `tolerance_m` less a buffer of
 /// [`CLEARANCE_BUFFER_M`] (at most half the tolerance), for the same reason.
 pub fn buffered_tolerance(tolerance_m: f64) -> f64 {

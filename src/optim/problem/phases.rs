@@ -151,6 +151,10 @@ pub struct PhaseRows {
     rows: [Vec<DVector<f64>>; 4],
     /// L1 norms of `rows` (how far a row can move per unit of trust region).
     l1: [Vec<f64>; 4],
+    /// Clearance (m) the optimiser keeps at each phase beyond the
+    /// request's: zero, except where the verification found the trajectory
+    /// too close between the phases ([`PhaseRows::raise_margin`]).
+    margins: Vec<f64>,
 }
 
 impl PhaseRows {
@@ -172,6 +176,7 @@ impl PhaseRows {
             basis: Default::default(),
             rows: Default::default(),
             l1: Default::default(),
+            margins: Vec::new(),
         };
         for &p in phases {
             rows.push(basis, whitening, p);
@@ -179,10 +184,11 @@ impl PhaseRows {
         rows
     }
 
-    /// Add one phase (no-op when it is already present to 1e-12).
-    pub fn push(&mut self, basis: &Basis, whitening: &Whitening, phase: f64) {
-        if self.phases.iter().any(|p| (p - phase).abs() < 1e-12) {
-            return;
+    /// Add one phase (no-op when it is already present to 1e-12); returns
+    /// its index.
+    pub fn push(&mut self, basis: &Basis, whitening: &Whitening, phase: f64) -> usize {
+        if let Some(i) = self.phases.iter().position(|p| (p - phase).abs() < 1e-12) {
+            return i;
         }
         let l = whitening.factor();
         let nb = self.n_basis;
@@ -200,6 +206,24 @@ impl PhaseRows {
             self.basis[k].push(psi);
         }
         self.phases.push(phase);
+        self.margins.push(0.0);
+        self.phases.len() - 1
+    }
+
+    /// The extra clearance (m) kept at phase `p`.
+    pub fn margin(&self, p: usize) -> f64 {
+        self.margins[p]
+    }
+
+    /// Raise phase `p`'s extra clearance by `by` (m), to at most `cap`;
+    /// returns whether it changed.
+    pub fn raise_margin(&mut self, p: usize, by: f64, cap: f64) -> bool {
+        let raised = (self.margins[p] + by).min(cap);
+        let changed = raised > self.margins[p];
+        if changed {
+            self.margins[p] = raised;
+        }
+        changed
     }
 
     /// Number of phases.
@@ -287,6 +311,29 @@ mod tests {
     use super::*;
     use crate::fixtures::example_distribution;
     use crate::promp::PrompConfig;
+
+    #[test]
+    fn a_phase_is_added_once_and_its_margin_rises_to_the_cap() {
+        let basis = Basis::new(&PrompConfig::default()).unwrap();
+        let dist = example_distribution(&basis, 20, 5).unwrap();
+        let wh = Whitening::new(&dist, Whitening::default_lambda(&dist)).unwrap();
+        let mut rows = PhaseRows::new(&basis, &wh, 7, (4.0, TimeWarp::Ramped), &[0.0, 0.5]);
+        assert_eq!(rows.push(&basis, &wh, 0.25), 2);
+        assert_eq!(rows.push(&basis, &wh, 0.5 + 1e-13), 1, "present to 1e-12");
+        assert_eq!(rows.len(), 3);
+        assert!((0..3).all(|p| rows.margin(p) == 0.0));
+        assert!(rows.raise_margin(2, 0.002, 0.005));
+        assert!(rows.raise_margin(2, 0.002, 0.005));
+        assert_eq!(rows.margin(2), 0.004);
+        assert!(rows.raise_margin(2, 0.002, 0.005), "raised to the cap");
+        assert_eq!(rows.margin(2), 0.005);
+        assert!(!rows.raise_margin(2, 0.002, 0.005), "at the cap: unchanged");
+        assert!(
+            !rows.raise_margin(0, 0.0, 0.005),
+            "a zero deficit changes nothing"
+        );
+        assert_eq!((rows.margin(0), rows.margin(1)), (0.0, 0.0));
+    }
 
     #[test]
     fn rows_reproduce_every_derivative_of_the_weights() {

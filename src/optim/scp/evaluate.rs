@@ -114,9 +114,12 @@ impl Problem {
         };
         let mut buffered = 0.0;
         let mut truth = 0.0;
-        for c in pairs.iter().flat_map(|pp| &pp.list) {
-            buffered += (target - c.distance).max(0.0);
-            truth += (self.clearance_m - c.distance).max(0.0);
+        for pp in &pairs {
+            let phase_target = target + rows.margin(pp.phase);
+            for c in &pp.list {
+                buffered += (phase_target - c.distance).max(0.0);
+                truth += (self.clearance_m - c.distance).max(0.0);
+            }
         }
         let ends: Vec<EndEval> = self
             .end_constraints

@@ -28,7 +28,17 @@
 //! constraint (`infeasible` is reserved for proofs: [`Problem::diagnose`]'s
 //! certificates and a QP whose hard limit rows Clarabel proves
 //! incompatible). A converged feasible iterate is verified densely; flagged
-//! phases join the optimisation set and the loop goes on.
+//! phases join the optimisation set and the loop goes on. Where the
+//! verification found the trajectory inside the clearance (at a dense
+//! sample, or by the continuous certificate between two), the flagged
+//! phases' clearance rows also aim that much farther out (at most
+//! [`MAX_MARGIN_STEP_M`](crate::optim::tolerances::MAX_MARGIN_STEP_M) more
+//! per round), up to
+//! [`MAX_CLEARANCE_MARGIN_M`](crate::optim::tolerances::MAX_CLEARANCE_MARGIN_M)
+//! ([`PhaseRows::margin`](crate::optim::problem::phases::PhaseRows::margin)):
+//! a trajectory that slides along an obstacle dips between whatever phases
+//! hold it, so holding it only at the new phases moved the dip along, one
+//! verification round after another.
 
 mod evaluate;
 mod line_search;

@@ -33,14 +33,15 @@
 use crate::optim::problem::phases::PhaseRows;
 use crate::optim::problem::Problem;
 use crate::optim::qp::{ClarabelInfo, QpFailure, QpSolution};
-use crate::optim::report::FinalQp;
+use crate::optim::report::{FinalQp, TrajectoryReport};
 use crate::optim::scp::evaluate::GridEval;
 use crate::optim::scp::line_search::{Correction, StepTrial};
 use crate::optim::scp::subproblem::{ActiveRows, Linearisation};
 use crate::optim::solution::{timed, Solution, SolveControl, SolveStats};
 use crate::optim::stop_reason::{Interruption, StopReason};
 use crate::optim::tolerances::{
-    BALL_ACTIVE_FRACTION, MAX_PENALTY, MAX_TRUST_REGION, MIN_TRUST_REGION, OPTIMALITY_TOLERANCE,
+    BALL_ACTIVE_FRACTION, MAX_CLEARANCE_MARGIN_M, MAX_MARGIN_STEP_M, MAX_PENALTY, MAX_TRUST_REGION,
+    MIN_TRUST_REGION, OPTIMALITY_TOLERANCE,
 };
 use crate::optim::verify::Verification;
 use crate::Result;
@@ -268,9 +269,20 @@ impl<'a> Scp<'a> {
             sol.report.final_qp = Some(final_qp);
             return Flow::Done(Box::new(sol));
         }
-        let added = self.add_flagged(&v);
+        let (added, raised) = self.add_flagged(&v);
         self.stats.added_phases += added;
-        if added == 0 {
+        tracing::debug!(
+            iteration = self.stats.iterations,
+            flagged = v.flagged.len(),
+            added,
+            raised,
+            deficit = clearance_deficit(self.problem.clearance_m, &v.report),
+            grid = self.rows.len(),
+            dense_clearance = v.report.min_clearance_m,
+            continuous_clearance = v.report.continuous_clearance_m,
+            "verification flagged phases"
+        );
+        if added + raised == 0 {
             let reason = "dense verification failed on a constraint the optimiser cannot refine (goal or equality)";
             return self.answer(
                 StopReason::VerificationFailed,
@@ -541,16 +553,24 @@ impl<'a> Scp<'a> {
     }
 
     /// Add (a spread-out subset of) the phases dense verification flagged
-    /// to the optimisation phases; returns how many were new.
-    fn add_flagged(&mut self, v: &Verification) -> usize {
+    /// to the optimisation phases, and raise their extra clearance by the
+    /// verification's clearance deficit ([`clearance_deficit`], at most
+    /// [`MAX_MARGIN_STEP_M`] per round), so
+    /// that a trajectory that dipped between the phases is held farther
+    /// out there, not only at the phases; returns how many phases were new
+    /// and how many margins changed.
+    fn add_flagged(&mut self, v: &Verification) -> (usize, usize) {
         let p = self.problem;
+        let deficit = clearance_deficit(p.clearance_m, &v.report).min(MAX_MARGIN_STEP_M);
         let rows = self.rows.to_mut();
         let before = rows.len();
         let stride = v.flagged.len().div_ceil(MAX_ADDED_PER_ROUND).max(1);
+        let mut raised = 0;
         for &phase in v.flagged.iter().step_by(stride) {
-            rows.push(&p.basis, &p.whitening, phase);
+            let i = rows.push(&p.basis, &p.whitening, phase);
+            raised += usize::from(rows.raise_margin(i, deficit, MAX_CLEARANCE_MARGIN_M));
         }
-        rows.len() - before
+        (rows.len() - before, raised)
     }
 
     /// Finish as `max_iterations` because the caller stopped the solver;
@@ -617,3 +637,44 @@ impl<'a> Scp<'a> {
 
 /// Most phases added per dense verification round.
 const MAX_ADDED_PER_ROUND: usize = 64;
+
+/// How far (m) the verified trajectory comes inside `clearance_m`: at the
+/// closest dense sample when that one is inside (a measured distance), else
+/// by the continuous certificate between the samples (zero when both keep
+/// the clearance or the scene is empty). The certificate's bound is only
+/// read when every sample clears: next to a sample inside the clearance it
+/// is not bisected and says little about how far out the trajectory must go.
+fn clearance_deficit(clearance_m: f64, report: &TrajectoryReport) -> f64 {
+    let closest = match report.min_clearance_m {
+        Some(dense) if dense < clearance_m => dense,
+        _ => report
+            .continuous_clearance_m
+            .into_iter()
+            .chain(report.min_clearance_m)
+            .fold(f64::INFINITY, f64::min),
+    };
+    (clearance_m - closest).max(0.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_deficit_is_the_closest_figure_inside_the_clearance() {
+        let report = |dense: Option<f64>, continuous: Option<f64>| TrajectoryReport {
+            min_clearance_m: dense,
+            continuous_clearance_m: continuous,
+            ..Default::default()
+        };
+        let deficit = |r: &TrajectoryReport| clearance_deficit(0.005, r);
+        assert_eq!(deficit(&report(None, None)), 0.0, "no obstacles");
+        assert_eq!(deficit(&report(Some(0.006), Some(0.0052))), 0.0);
+        assert!((deficit(&report(Some(0.0052), Some(0.0043))) - 0.0007).abs() < 1e-15);
+        assert!((deficit(&report(Some(0.004), Some(0.0045))) - 0.001).abs() < 1e-15);
+        // Next to a sample inside, the certificate's unbisected bound is
+        // not read.
+        assert!((deficit(&report(Some(0.004), Some(-0.003))) - 0.001).abs() < 1e-15);
+        assert!((deficit(&report(Some(-0.01), None)) - 0.015).abs() < 1e-15);
+    }
+}

@@ -196,7 +196,7 @@ impl Problem {
                     key: c.key,
                     phase: c.phase,
                     score: -c.distance,
-                    in_band: c.distance < target + CLEARANCE_BAND_M,
+                    in_band: c.distance < target + at.rows.margin(c.phase_index) + CLEARANCE_BAND_M,
                 })
                 .collect::<Vec<_>>(),
         );
@@ -204,7 +204,8 @@ impl Problem {
     }
 
     /// Every clearance pair of `eval` linearised at its iterate:
-    /// `d + ∇d·(z - z_k) >= target`, with an L1-penalised slack. Each row
+    /// `d + ∇d·(z - z_k) >= target + margin` (the phase's extra clearance,
+    /// [`PhaseRows::margin`]), with an L1-penalised slack. Each row
     /// is kept in joint space (`∇_q d` at its phase); its whitened form is
     /// built only when it joins the QP ([`ClearanceRow::inequality`]).
     fn clearance_rows(
@@ -218,6 +219,7 @@ impl Problem {
             .iter()
             .flat_map(|pp| {
                 let qz = rows.linear_position(pp.phase, &eval.z);
+                let target = target + rows.margin(pp.phase);
                 pp.list.iter().map(move |c| {
                     let gradient = self
                         .scene
@@ -514,6 +516,62 @@ mod tests {
         }
         qp.trust = at.trust.map(|r| (at.eval.z.clone(), r));
         qp
+    }
+
+    #[test]
+    fn a_phase_margin_moves_its_rows_and_the_merit_by_exactly_the_margin() {
+        let robot = crate::robot::Robot::panda().unwrap();
+        let p = typical_request(&robot, 4, &ExampleSettings::default())
+            .unwrap()
+            .validate(&robot)
+            .unwrap();
+        let centre = DVector::zeros(p.whitening.dim());
+        let z0 = DVector::from_fn(p.whitening.dim(), |i, _| 0.05 * ((i % 5) as f64 - 2.0));
+        let ctl = SolveControl::default();
+        let plain = p.evaluate_grid(&p.grid, z0.clone(), &centre, &ctl);
+        // The phase with the closest pair, so that the margin binds there.
+        let closest = (0..plain.pairs.len())
+            .min_by(|&a, &b| {
+                let d = |k: usize| {
+                    plain.pairs[k]
+                        .list
+                        .iter()
+                        .map(|c| c.distance)
+                        .fold(f64::INFINITY, f64::min)
+                };
+                d(a).total_cmp(&d(b))
+            })
+            .unwrap();
+        let phase = plain.pairs[closest].phase;
+        let margin = 0.005;
+        let mut rows = p.grid.clone();
+        assert!(rows.raise_margin(phase, margin, 0.005));
+        let held = p.evaluate_grid(&rows, z0, &centre, &ctl);
+        let target = p.clearance_m + CLEARANCE_BUFFER_M;
+        // The merit counts the phase's pairs against the raised target,
+        // the true violation against the request's clearance as before.
+        let extra: f64 = plain.pairs[closest]
+            .list
+            .iter()
+            .map(|c| (target + margin - c.distance).max(0.0) - (target - c.distance).max(0.0))
+            .sum();
+        assert!(extra > 0.0, "the margin must bind somewhere");
+        let gained = held.buffered_violation - plain.buffered_violation;
+        assert!((gained - extra).abs() < 1e-12, "{gained} vs {extra}");
+        assert_eq!(held.true_violation, plain.true_violation);
+        // Each row at the iterate is short by its target less its distance:
+        // the margin at that phase, the plain target elsewhere.
+        let plain_rows = p.clearance_rows(&p.grid, &plain, target, 1.0);
+        let held_rows = p.clearance_rows(&rows, &held, target, 1.0);
+        assert_eq!(plain_rows.len(), held_rows.len());
+        for (a, b) in plain_rows.iter().zip(&held_rows) {
+            let qz = rows.linear_position(b.phase_index, &held.z);
+            let expected = if b.phase_index == phase { margin } else { 0.0 };
+            assert!((b.violation(&qz) - a.violation(&qz) - expected).abs() < 1e-12);
+            let at_iterate = b.violation(&qz);
+            let own_target = target + rows.margin(b.phase_index);
+            assert!((at_iterate - (own_target - b.distance)).abs() < 1e-12);
+        }
     }
 
     #[test]
