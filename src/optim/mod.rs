@@ -122,10 +122,7 @@ fn respond(
     let started = Instant::now();
     let problem = validate(task)?;
     let mean = problem.prior().mean.as_slice().to_vec();
-    let mut prior_mean_report = problem.evaluate_with(&mean, ctl);
-    let mut warnings = problem.warnings().to_vec();
-    warnings.append(&mut prior_mean_report.warnings);
-    prior_mean_report.warnings = warnings;
+    let prior_mean_report = prior_mean_report(&problem, ctl);
     let mut response = if let Some(found) = problem.diagnosis() {
         let proof = (StopReason::ProvenInfeasible, found.reason);
         let mut r = infeasible_at_prior_mean(&problem, mean, prior_mean_report, proof);
@@ -162,6 +159,16 @@ fn respond(
     };
     response.report.solve_ms = started.elapsed().as_secs_f64() * 1e3;
     Ok(response)
+}
+
+/// The dense verification of the prior mean, with the problem's own
+/// warnings first: every answer's `prior_mean_report`.
+fn prior_mean_report(problem: &Problem, ctl: &SolveControl) -> TrajectoryReport {
+    let mut report = problem.evaluate_with(problem.prior().mean.as_slice(), ctl);
+    let mut warnings = problem.warnings().to_vec();
+    warnings.append(&mut report.warnings);
+    report.warnings = warnings;
+    report
 }
 
 /// The answer for a request proven infeasible before any solve: the prior

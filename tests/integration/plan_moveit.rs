@@ -9,8 +9,12 @@ use crate::common::http::{
     assert_valid, client, code, field, openapi, post_json, start, test_config, without_timing,
 };
 use crate::common::robot::panda;
-use dpmp::moveit::{plan_moveit, MoveItPlanOptions, MoveItPlanResponse, MoveItQuery};
+use dpmp::moveit::{
+    plan_moveit, DurationChoice, MoveItPlanOptions, MoveItPlanResponse, MoveItQuery,
+};
 use dpmp::optim::auto_duration::{time_scale_to_limits, AUTO_DURATION_STEP};
+use dpmp::optim::problem::linear::RATE_BUFFER;
+use dpmp::optim::tolerances::OPTIMALITY_TOLERANCE;
 use dpmp::optim::SolveControl;
 use serde_json::{json, Value};
 
@@ -82,15 +86,13 @@ fn ball_on_tcp(id: &str, q: &[f64], radius: f64) -> Value {
 
 /// `request` in `scene` planned with the defaults, in the library.
 fn plan(scene: &Value, request: &Value) -> MoveItPlanResponse {
+    plan_with(scene, request, &MoveItPlanOptions::default())
+}
+
+fn plan_with(scene: &Value, request: &Value, options: &MoveItPlanOptions) -> MoveItPlanResponse {
     let robot = panda();
     let query = MoveItQuery::read(&scene.to_string(), &request.to_string(), &robot).unwrap();
-    plan_moveit(
-        &query,
-        &MoveItPlanOptions::default(),
-        &robot,
-        &SolveControl::default(),
-    )
-    .unwrap()
+    plan_moveit(&query, options, &robot, &SolveControl::default()).unwrap()
 }
 
 #[test]
@@ -411,5 +413,58 @@ fn auto_duration_is_the_shortest_within_ten_percent_that_keeps_the_rate_limits()
         );
         let last = &result.trajectory.points.last().unwrap().time_from_start;
         assert!((last - result.duration_s).abs() < 1e-9);
+    }
+}
+
+/// `duration: auto` retimes the exploring answer instead of searching
+/// again. In free space (a convex QP) and past a ball on the mean path
+/// (the run from the mean at either duration reaches the same side) that
+/// answer is at least as close to the prior as a direct solve at the
+/// chosen duration (the direct solve's rate rows keep `RATE_BUFFER` inside
+/// the limits that the verification checks, so its feasible set lies
+/// within the retimed answer's), and no farther than that buffer moves it,
+/// each within the solver's optimality tolerance.
+#[test]
+fn the_retimed_answer_is_the_direct_solves_at_its_duration() {
+    let middle: Vec<f64> = READY
+        .iter()
+        .zip(&GOAL)
+        .map(|(a, b)| 0.5 * (a + b))
+        .collect();
+    let blocked = scene(&[ball_on_tcp("on the way", &middle, 0.03)]);
+    for (velocity_scaling, goal, world) in [
+        (0.0, GOAL, scene(&[])),
+        (0.5, GOAL, scene(&[])),
+        (0.0, [-0.4, 0.2, -0.3, -1.5, -0.2, 2.2, 1.2], scene(&[])),
+        (0.0, GOAL, blocked.clone()),
+        (0.5, GOAL, blocked),
+    ] {
+        let mut request = request(&READY, &goal, 30.0);
+        request["max_velocity_scaling_factor"] = json!(velocity_scaling);
+        let auto = plan(&world, &request).result;
+        let fixed = MoveItPlanOptions {
+            duration_s: DurationChoice::Seconds(auto.duration_s),
+            ..MoveItPlanOptions::default()
+        };
+        let direct = plan_with(&world, &request, &fixed).result;
+        assert_eq!(auto.status, dpmp::optim::Status::Optimal);
+        assert_eq!(direct.status, dpmp::optim::Status::Optimal);
+        let gap = direct.mahalanobis - auto.mahalanobis;
+        // Each run stops within the optimality tolerance of its optimum.
+        let slack = OPTIMALITY_TOLERANCE * (1.0 + direct.mahalanobis);
+        assert!(
+            (-slack..=slack + 2.0 * RATE_BUFFER * (1.0 + direct.mahalanobis)).contains(&gap),
+            "Mahalanobis {} retimed vs {} direct at {} s",
+            auto.mahalanobis,
+            direct.mahalanobis,
+            auto.duration_s
+        );
+        let step = auto
+            .weights
+            .iter()
+            .zip(&direct.weights)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        assert!(step <= 1e-2, "weights differ by {step} rad");
     }
 }
