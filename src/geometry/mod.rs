@@ -9,8 +9,11 @@
 //!   distance to its convex hull;
 //! - [`segment`]: closest points and distances between segments and points
 //!   (the kernel of capsule, hull and broad-phase distances);
+//! - [`convex_gap`]: the closest points of a point cloud's hull and a
+//!   support-map shape, in `f64` (parry3d-f64's GJK);
 //! - [`random_unit`]: uniformly random directions.
 
+pub mod convex_gap;
 pub mod primitive;
 pub mod quaternion;
 pub mod segment;

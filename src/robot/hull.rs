@@ -46,7 +46,6 @@ struct HullData {
     faces: Vec<[u32; 3]>,
     frame: nalgebra::Isometry3<f64>,
     shape: Arc<ConvexPolyhedron>,
-    surface: Arc<parry3d::shape::TriMesh>,
     bound: ([f64; 3], [f64; 3], f64),
     allowance: f64,
     source: Option<Arc<TriangleMesh>>,
@@ -128,8 +127,6 @@ impl ConvexHull {
                 points.len()
             ));
         }
-        let surface = parry3d::shape::TriMesh::new(hull_points.clone(), faces.clone())
-            .map_err(|e| format!("parry3d rejected the hull's triangles ({e:?})"))?;
         let shape = ConvexPolyhedron::from_convex_mesh(hull_points, &faces)
             .ok_or("parry3d rejected the convex hull of the mesh")?;
         let planes = face_planes(&vertices, &faces);
@@ -141,7 +138,6 @@ impl ConvexHull {
             faces,
             frame: nalgebra::Isometry3::translation(centre[0], centre[1], centre[2]),
             shape: Arc::new(shape),
-            surface: Arc::new(surface),
             allowance: ROUNDING_ALLOWANCE_M,
             source: None,
             planes,
@@ -183,13 +179,6 @@ impl ConvexHull {
         &self.0.shape
     }
 
-    /// The hull's triangles as a parry3d `TriMesh`, in the same frame as
-    /// [`ConvexHull::shape`]: distance queries against single triangles
-    /// stay accurate where GJK on the whole point cloud does not.
-    pub fn surface_mesh(&self) -> &Arc<parry3d::shape::TriMesh> {
-        &self.0.surface
-    }
-
     /// Pose of the parry shape's frame in the link frame.
     pub fn frame(&self) -> &nalgebra::Isometry3<f64> {
         &self.0.frame
@@ -228,7 +217,6 @@ impl ConvexHull {
             faces: self.0.faces.clone(),
             frame: pose * self.0.frame,
             shape: self.0.shape.clone(),
-            surface: self.0.surface.clone(),
             bound: (map(&a), map(&b), r),
             allowance: self.0.allowance,
             source: self.0.source.as_ref().map(|m| Arc::new(m.mapped(map))),

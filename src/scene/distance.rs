@@ -6,9 +6,9 @@ use super::clip::{near_piece, Cut};
 use super::contact::PairContact;
 use super::round_contact::round_contact;
 use super::shape::{from_glam, parry_pose_relative, to_glam, LocalShape, Part, RobotPart};
+use crate::geometry::convex_gap::{hull_shape_gap, ConvexGap};
 use crate::robot::hull::ConvexHull;
 use nalgebra::{Isometry3, Point3, Vector3};
-use parry3d::query::ClosestPoints;
 
 /// Signed distance between `robot` and `part` when below `prediction` (m);
 /// `None` when they are further apart. A long part is first cut to the
@@ -162,9 +162,9 @@ fn part_support_min(part: &Part) -> Option<impl Fn(&Vector3<f64>) -> f64 + '_> {
 /// to the mesh: balls and capsules (berries, stems) by the exact `f64`
 /// hull query ([`ConvexHull::segment_contact`]); other parts by a
 /// separating-axis lower bound along the best of the direction between
-/// parry3d's closest points on the hull's *triangles* (accurate, where GJK
-/// on the hull's whole point cloud can err by a centimetre) and the hull's
-/// face normals. The hull's allowance is subtracted in both cases.
+/// the closest points of the hull's vertices and the part (parry3d-f64's
+/// GJK, [`hull_shape_gap`]) and the hull's face normals. The hull's
+/// allowance is subtracted in both cases.
 fn hull_contact(
     hull: &ConvexHull,
     link_pose: &Isometry3<f64>,
@@ -191,30 +191,22 @@ fn hull_contact(
             normal,
         });
     }
-    let shape_pose = link_pose * hull.frame();
-    let origin = shape_pose.translation.vector;
-    let pos1 = parry_pose_relative(&shape_pose, &origin);
-    let pos2 = parry_pose_relative(&part.pose, &origin);
-    let limit = (prediction + allowance).max(0.0) as f32;
-    let near = parry3d::query::closest_points(
-        &pos1,
-        hull.surface_mesh().as_ref(),
-        &pos2,
-        part.shape.as_ref(),
-        limit,
-    )
-    .ok()?;
     let inside = hull.plane_distance(
         &(link_pose.inverse() * Point3::from(part.core.a))
             .coords
             .into(),
     ) <= 0.0;
+    let limit = (prediction + allowance).max(0.0);
+    let near = match part.shape.as_support_map() {
+        Some(shape) => hull_shape_gap(hull.vertices(), link_pose, shape, &part.pose, limit),
+        None => ConvexGap::Overlapping,
+    };
     let (guess, witnesses) = match near {
-        ClosestPoints::Disjoint if !inside => return None,
-        ClosestPoints::WithinMargin(p1, p2) if !inside => {
-            let (p1, p2) = (from_glam(p1) + origin, from_glam(p2) + origin);
-            ((p1 - p2).try_normalize(1e-12), Some((p1, p2)))
-        }
+        ConvexGap::Beyond if !inside => return None,
+        ConvexGap::Within { on_hull, on_shape } if !inside => (
+            (on_hull - on_shape).try_normalize(1e-12),
+            Some((on_hull, on_shape)),
+        ),
         _ => (None, None),
     };
     let (normal, separation) =

@@ -17,6 +17,7 @@ mod cli_prior;
 mod cli_prior_fit;
 mod data_import;
 mod first_hour;
+mod geometry_convex_gap;
 mod http_abuse;
 mod http_api;
 mod http_contract;
