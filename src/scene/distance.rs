@@ -209,8 +209,13 @@ fn hull_contact(
         ),
         _ => (None, None),
     };
-    let (normal, separation) =
-        best_separating_axis(hull, link_pose, part, guess.unwrap_or_else(Vector3::z));
+    // GJK's direction between two apart convex sets is the distance's own
+    // (the separation along it is within 1e-7 m of the distance: the
+    // face normals cannot beat it); the face normals bound an overlap.
+    let (normal, separation) = match (guess, witnesses) {
+        (Some(normal), Some(_)) => (normal, separation_along(hull, link_pose, part, &normal)),
+        _ => best_separating_axis(hull, link_pose, part, guess.unwrap_or_else(Vector3::z)),
+    };
     let distance = separation - allowance;
     if distance >= prediction {
         return None;
@@ -227,31 +232,47 @@ fn hull_contact(
     })
 }
 
-/// The largest separation `min_{y ∈ part} u·y − max_{x ∈ hull} u·x` over
-/// the candidate axes `u` pointing from the hull to the part (parry's
-/// direction and the hull's outward face normals), with the normal from the
-/// part towards the hull (`-u`). Every such separation is a lower bound on
-/// the signed distance (which is their maximum over all directions).
+/// The separation `min_{y ∈ part} u·y − max_{x ∈ hull} u·x` along
+/// `u = -normal` (`normal` pointing from the part towards the hull): a
+/// lower bound on the signed distance; −∞ for a part without a support map.
+fn separation_along(
+    hull: &ConvexHull,
+    link_pose: &Isometry3<f64>,
+    part: &Part,
+    normal: &Vector3<f64>,
+) -> f64 {
+    match part_support_min(part) {
+        Some(part_min) => part_min(&-normal) - hull_max(hull, link_pose, &-normal),
+        None => f64::NEG_INFINITY,
+    }
+}
+
+/// `max_{x ∈ hull} u·x` (base frame) over the hull's vertices.
+fn hull_max(hull: &ConvexHull, link_pose: &Isometry3<f64>, u: &Vector3<f64>) -> f64 {
+    let local = link_pose.rotation.inverse() * u;
+    let top = hull
+        .vertices()
+        .iter()
+        .map(|v| local.dot(&Vector3::from(*v)))
+        .fold(f64::NEG_INFINITY, f64::max);
+    top + u.dot(&link_pose.translation.vector)
+}
+
+/// The largest separation (see [`separation_along`]) over the candidate
+/// axes `u` pointing from the hull to the part (`-guess` and the hull's
+/// outward face normals), with the normal from the part towards the hull
+/// (`-u`). Every such separation is a lower bound on the signed distance
+/// (which is their maximum over all directions).
 fn best_separating_axis(
     hull: &ConvexHull,
     link_pose: &Isometry3<f64>,
     part: &Part,
-    parry_normal: Vector3<f64>,
+    guess: Vector3<f64>,
 ) -> (Vector3<f64>, f64) {
     let Some(part_min) = part_support_min(part) else {
-        return (parry_normal, f64::NEG_INFINITY);
+        return (guess, f64::NEG_INFINITY);
     };
-    let hull_max = |u: &Vector3<f64>| -> f64 {
-        let local = link_pose.rotation.inverse() * u;
-        let top = hull
-            .vertices()
-            .iter()
-            .map(|v| local.dot(&Vector3::from(*v)))
-            .fold(f64::NEG_INFINITY, f64::max);
-        top + u.dot(&link_pose.translation.vector)
-    };
-    let u0 = -parry_normal;
-    let mut best = (parry_normal, part_min(&u0) - hull_max(&u0));
+    let mut best = (guess, separation_along(hull, link_pose, part, &guess));
     for (n, d) in hull.planes() {
         if d.is_infinite() {
             continue;
@@ -264,6 +285,7 @@ fn best_separating_axis(
     }
     best
 }
+
 /// Distance from `p` to the part (0 inside).
 pub fn point_distance(part: &Part, p: &Vector3<f64>) -> f64 {
     let origin = part.pose.translation.vector;
