@@ -18,6 +18,7 @@ use parry3d_f64::math::{Pose, Rot3, Vector};
 use parry3d_f64::query::details::closest_points_support_map_support_map;
 use parry3d_f64::query::ClosestPoints;
 use parry3d_f64::shape::SupportMap;
+use std::cell::Cell;
 
 /// How two convex sets stand relative to each other.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -36,22 +37,38 @@ pub enum ConvexGap {
     Overlapping,
 }
 
-/// The convex hull of `points` (their frame placed by `hull_pose`) against
+/// A convex polytope as its vertices and, optionally, its skeleton: the
+/// vertices sharing an edge with vertex `i` are `neighbours(i)`. With the
+/// skeleton the support point is found by climbing it (a linear function
+/// on a convex polytope has no local maximum but the global one), from the
+/// last support point found; without it, by scanning every vertex.
+#[derive(Clone, Copy)]
+pub struct Polytope<'a> {
+    /// The vertices.
+    pub points: &'a [[f64; 3]],
+    /// The skeleton's neighbour lists, if known.
+    pub neighbours: Option<&'a dyn Fn(usize) -> &'a [u32]>,
+}
+
+/// The convex hull `hull` (its frame placed by `hull_pose`) against
 /// `shape` (placed by `shape_pose`), when closer than `limit`.
 pub fn hull_shape_gap(
-    points: &[[f64; 3]],
+    hull: Polytope<'_>,
     hull_pose: &Isometry3<f64>,
     shape: &dyn parry3d::shape::SupportMap,
     shape_pose: &Isometry3<f64>,
     limit: f64,
 ) -> ConvexGap {
-    if points.is_empty() {
+    if hull.points.is_empty() {
         return ConvexGap::Beyond;
     }
     let relative = hull_pose.inverse() * shape_pose;
     let near = closest_points_support_map_support_map(
         &pose_f64(&relative),
-        &PointCloud(points),
+        &Support {
+            hull,
+            last: Cell::new(0),
+        },
         &ShapeF32(shape),
         limit.max(0.0),
     );
@@ -65,22 +82,41 @@ pub fn hull_shape_gap(
     }
 }
 
-/// The convex hull of a point cloud as a support map: the point furthest
-/// along the direction (a scan: the Panda's hulls have a few hundred).
-struct PointCloud<'a>(&'a [[f64; 3]]);
+/// A polytope's support map, climbing from the last support point (GJK
+/// asks along directions that turn little between steps).
+struct Support<'a> {
+    hull: Polytope<'a>,
+    last: Cell<usize>,
+}
 
-impl SupportMap for PointCloud<'_> {
+impl SupportMap for Support<'_> {
     fn local_support_point(&self, dir: Vector) -> Vector {
-        let mut best = self.0[0];
-        let mut top = f64::NEG_INFINITY;
-        for p in self.0 {
-            let along = p[0] * dir.x + p[1] * dir.y + p[2] * dir.z;
-            if along > top {
-                top = along;
-                best = *p;
+        let points = self.hull.points;
+        let along = |i: usize| points[i][0] * dir.x + points[i][1] * dir.y + points[i][2] * dir.z;
+        let best = match self.hull.neighbours {
+            Some(neighbours) => {
+                let mut at = self.last.get().min(points.len() - 1);
+                let mut top = along(at);
+                loop {
+                    let from = at;
+                    for &j in neighbours(from) {
+                        let v = along(j as usize);
+                        if v > top {
+                            (at, top) = (j as usize, v);
+                        }
+                    }
+                    if at == from {
+                        break at;
+                    }
+                }
             }
-        }
-        Vector::new(best[0], best[1], best[2])
+            None => (0..points.len())
+                .max_by(|&a, &b| along(a).total_cmp(&along(b)))
+                .unwrap_or(0),
+        };
+        self.last.set(best);
+        let p = points[best];
+        Vector::new(p[0], p[1], p[2])
     }
 }
 
@@ -111,6 +147,13 @@ mod tests {
     use nalgebra::{Translation3, UnitQuaternion};
     use parry3d::shape::Cuboid;
 
+    fn cloud(points: &[[f64; 3]]) -> Polytope<'_> {
+        Polytope {
+            points,
+            neighbours: None,
+        }
+    }
+
     fn cube_points(half: f64) -> Vec<[f64; 3]> {
         let mut p = Vec::new();
         for x in [-half, half] {
@@ -139,7 +182,7 @@ mod tests {
             hull_pose.rotation,
         );
         let ConvexGap::Within { on_hull, on_shape } =
-            hull_shape_gap(&points, &hull_pose, &cuboid, &shape_pose, 1.0)
+            hull_shape_gap(cloud(&points), &hull_pose, &cuboid, &shape_pose, 1.0)
         else {
             panic!("the boxes are 0.3 m apart");
         };
@@ -147,7 +190,7 @@ mod tests {
         let local = hull_pose.inverse() * nalgebra::Point3::from(on_hull);
         assert!((local.x - 0.1).abs() < 1e-9, "{local}");
         assert_eq!(
-            hull_shape_gap(&points, &hull_pose, &cuboid, &shape_pose, 0.29),
+            hull_shape_gap(cloud(&points), &hull_pose, &cuboid, &shape_pose, 0.29),
             ConvexGap::Beyond
         );
         let touching = Isometry3::from_parts(
@@ -155,7 +198,7 @@ mod tests {
             hull_pose.rotation,
         );
         assert_eq!(
-            hull_shape_gap(&points, &hull_pose, &cuboid, &touching, 1.0),
+            hull_shape_gap(cloud(&points), &hull_pose, &cuboid, &touching, 1.0),
             ConvexGap::Overlapping
         );
     }

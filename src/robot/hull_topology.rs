@@ -5,6 +5,7 @@
 //! - the faces around every vertex;
 //! - the neighbours of every face (the faces sharing at least one vertex
 //!   with it);
+//! - the neighbours of every vertex (the vertices sharing an edge with it);
 //! - a few *seed* faces spread over the directions (for each of the 26
 //!   directions of a cube's faces, edges and corners, the face whose normal
 //!   points most nearly along it), where a walk starts.
@@ -46,6 +47,10 @@ pub struct HullTopology {
     pub vertex_faces: IndexLists,
     /// Faces sharing a vertex with every face (itself excluded).
     pub face_neighbours: IndexLists,
+    /// Vertices sharing an edge with every vertex: the hull's skeleton,
+    /// which a linear function climbs to its maximum (the support map of
+    /// [`crate::geometry::convex_gap`]).
+    pub vertex_neighbours: IndexLists,
     /// Faces whose normals are closest to 26 directions spread over the
     /// sphere (duplicates removed).
     pub seeds: Vec<u32>,
@@ -78,6 +83,18 @@ impl HullTopology {
                 list
             })
             .collect();
+        let mut joined = vec![Vec::new(); n_vertices];
+        for face in faces {
+            for k in 0..3 {
+                let (a, b) = (face[k], face[(k + 1) % 3]);
+                joined[a as usize].push(b);
+                joined[b as usize].push(a);
+            }
+        }
+        for list in &mut joined {
+            list.sort_unstable();
+            list.dedup();
+        }
         let direction_seeds = direction_seeds(normals);
         let mut seeds: Vec<u32> = Vec::new();
         for (i, &f) in direction_seeds.iter().enumerate() {
@@ -88,6 +105,7 @@ impl HullTopology {
         HullTopology {
             vertex_faces: IndexLists::from_lists(around),
             face_neighbours: IndexLists::from_lists(neighbours),
+            vertex_neighbours: IndexLists::from_lists(joined),
             seeds,
             direction_seeds,
         }

@@ -3,12 +3,13 @@
 //! points lie in their sets (so their distance bounds the true distance
 //! from above), and the separation along their direction, from the hull's
 //! vertices and the box's corners, bounds it from below; the two agree to
-//! 1e-7 m. Boxes thin and thick, rotated, from overlapping to 6 cm away;
+//! 1e-7 m; climbing the hull's skeleton for the support points answers
+//! what scanning every vertex answers. Boxes thin and thick, rotated, from overlapping to 6 cm away;
 //! an overlap is reported exactly when the separating-axis test over both
 //! shapes' face normals and edge pairs finds no gap.
 
 use crate::common::robot::{mesh_hulls, panda};
-use dpmp::geometry::convex_gap::{hull_shape_gap, ConvexGap};
+use dpmp::geometry::convex_gap::{hull_shape_gap, ConvexGap, Polytope};
 use dpmp::robot::hull::ConvexHull;
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use parry3d::shape::Cuboid;
@@ -137,7 +138,35 @@ fn hull_box_gap_is_sandwiched_by_its_witnesses_and_the_separation_along_them() {
                 pose.translation.vector -= u * (along - target);
             }
             let truth = sat_gap(&hull, &link, &half, &pose);
-            match hull_shape_gap(hull.vertices(), &link, &cuboid, &pose, 0.05) {
+            let topology = hull.topology();
+            let neighbours = |i: usize| topology.vertex_neighbours.get(i);
+            let climbing = Polytope {
+                points: hull.vertices(),
+                neighbours: Some(&neighbours),
+            };
+            let scanning = Polytope {
+                points: hull.vertices(),
+                neighbours: None,
+            };
+            let gap = hull_shape_gap(climbing, &link, &cuboid, &pose, 0.05);
+            // Climbing the skeleton finds what a scan of every vertex finds
+            // (the witnesses may differ where the closest pair is not unique).
+            match (gap, hull_shape_gap(scanning, &link, &cuboid, &pose, 0.05)) {
+                (
+                    ConvexGap::Within {
+                        on_hull: a,
+                        on_shape: b,
+                    },
+                    ConvexGap::Within {
+                        on_hull: c,
+                        on_shape: d,
+                    },
+                ) => {
+                    assert!(((b - a).norm() - (d - c).norm()).abs() <= 1e-9);
+                }
+                (climbed, scanned) => assert_eq!(climbed, scanned),
+            }
+            match gap {
                 ConvexGap::Within { on_hull, on_shape } => {
                     within += 1;
                     let upper = (on_shape - on_hull).norm();
@@ -168,7 +197,7 @@ fn hull_box_gap_is_sandwiched_by_its_witnesses_and_the_separation_along_them() {
                     // The same query with a farther limit finds the pair
                     // (sandwiched as above) at 5 cm or more.
                     let ConvexGap::Within { on_hull, on_shape } =
-                        hull_shape_gap(hull.vertices(), &link, &cuboid, &pose, 1.0)
+                        hull_shape_gap(climbing, &link, &cuboid, &pose, 1.0)
                     else {
                         panic!("apart by {truth} m (at least), not found within 1 m");
                     };
