@@ -191,11 +191,9 @@ fn hull_contact(
             normal,
         });
     }
-    let inside = hull.plane_distance(
-        &(link_pose.inverse() * Point3::from(part.core.a))
-            .coords
-            .into(),
-    ) <= 0.0;
+    // GJK on the two convex sets: apart beyond the limit only with a
+    // separating axis (the support points along it), and a part inside the
+    // hull overlaps it, so no containment check is needed.
     let limit = (prediction + allowance).max(0.0);
     let near = match part.shape.as_support_map() {
         Some(shape) => {
@@ -210,12 +208,12 @@ fn hull_contact(
         None => ConvexGap::Overlapping,
     };
     let (guess, witnesses) = match near {
-        ConvexGap::Beyond if !inside => return None,
-        ConvexGap::Within { on_hull, on_shape } if !inside => (
+        ConvexGap::Beyond => return None,
+        ConvexGap::Within { on_hull, on_shape } => (
             (on_hull - on_shape).try_normalize(1e-12),
             Some((on_hull, on_shape)),
         ),
-        _ => (None, None),
+        ConvexGap::Overlapping => (None, None),
     };
     // GJK's direction between two apart convex sets is the distance's own
     // (the separation along it is within 1e-7 m of the distance: the
