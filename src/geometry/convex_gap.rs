@@ -37,17 +37,28 @@ pub enum ConvexGap {
     Overlapping,
 }
 
-/// A convex polytope as its vertices and, optionally, its skeleton: the
-/// vertices sharing an edge with vertex `i` are `neighbours(i)`. With the
-/// skeleton the support point is found by climbing it (a linear function
-/// on a convex polytope has no local maximum but the global one), from the
-/// last support point found; without it, by scanning every vertex.
+/// A convex polytope's skeleton: the vertices sharing an edge with each
+/// vertex, and where to start climbing towards a direction.
+pub trait Skeleton {
+    /// The vertices sharing an edge with vertex `i`.
+    fn neighbours(&self, i: usize) -> &[u32];
+
+    /// A vertex near the support point along `dir` (any length), where a
+    /// climb towards `dir` starts.
+    fn start_towards(&self, dir: &Vector3<f64>) -> usize;
+}
+
+/// A convex polytope as its vertices and, optionally, its skeleton. With
+/// the skeleton the support point is found by climbing it (a linear
+/// function on a convex polytope has no local maximum but the global one):
+/// the first from the skeleton's start towards the direction, each next
+/// from the last support point found; without it, by scanning every vertex.
 #[derive(Clone, Copy)]
 pub struct Polytope<'a> {
     /// The vertices.
     pub points: &'a [[f64; 3]],
-    /// The skeleton's neighbour lists, if known.
-    pub neighbours: Option<&'a dyn Fn(usize) -> &'a [u32]>,
+    /// The skeleton, if known.
+    pub skeleton: Option<&'a dyn Skeleton>,
 }
 
 /// The convex hull `hull` (its frame placed by `hull_pose`) against
@@ -67,7 +78,7 @@ pub fn hull_shape_gap(
         &pose_f64(&relative),
         &Support {
             hull,
-            last: Cell::new(0),
+            last: Cell::new(None),
         },
         &ShapeF32(shape),
         limit.max(0.0),
@@ -86,20 +97,24 @@ pub fn hull_shape_gap(
 /// asks along directions that turn little between steps).
 struct Support<'a> {
     hull: Polytope<'a>,
-    last: Cell<usize>,
+    last: Cell<Option<usize>>,
 }
 
 impl SupportMap for Support<'_> {
     fn local_support_point(&self, dir: Vector) -> Vector {
         let points = self.hull.points;
         let along = |i: usize| points[i][0] * dir.x + points[i][1] * dir.y + points[i][2] * dir.z;
-        let best = match self.hull.neighbours {
-            Some(neighbours) => {
-                let mut at = self.last.get().min(points.len() - 1);
+        let best = match self.hull.skeleton {
+            Some(skeleton) => {
+                let from = self
+                    .last
+                    .get()
+                    .unwrap_or_else(|| skeleton.start_towards(&Vector3::new(dir.x, dir.y, dir.z)));
+                let mut at = from.min(points.len() - 1);
                 let mut top = along(at);
                 loop {
                     let from = at;
-                    for &j in neighbours(from) {
+                    for &j in skeleton.neighbours(from) {
                         let v = along(j as usize);
                         if v > top {
                             (at, top) = (j as usize, v);
@@ -114,7 +129,7 @@ impl SupportMap for Support<'_> {
                 .max_by(|&a, &b| along(a).total_cmp(&along(b)))
                 .unwrap_or(0),
         };
-        self.last.set(best);
+        self.last.set(Some(best));
         let p = points[best];
         Vector::new(p[0], p[1], p[2])
     }
@@ -150,7 +165,7 @@ mod tests {
     fn cloud(points: &[[f64; 3]]) -> Polytope<'_> {
         Polytope {
             points,
-            neighbours: None,
+            skeleton: None,
         }
     }
 

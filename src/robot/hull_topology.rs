@@ -13,6 +13,7 @@
 //! All of it is combinatorial (face and vertex indices), so a rigidly moved
 //! hull shares it unchanged.
 
+use crate::geometry::convex_gap::Skeleton;
 use nalgebra::Vector3;
 
 /// Lists of indices stored one after another (compressed rows).
@@ -57,6 +58,9 @@ pub struct HullTopology {
     /// The seed face of each direction `(i, j, k) ∈ {-1, 0, 1}³`, at index
     /// `(i + 1) + 3 (j + 1) + 9 (k + 1)` (the centre holds the first seed).
     direction_seeds: [u32; 27],
+    /// A vertex of each direction's seed face: where a climb of the
+    /// skeleton towards that direction starts.
+    direction_vertices: [u32; 27],
 }
 
 impl HullTopology {
@@ -96,6 +100,8 @@ impl HullTopology {
             list.dedup();
         }
         let direction_seeds = direction_seeds(normals);
+        let direction_vertices =
+            direction_seeds.map(|f| faces.get(f as usize).map_or(0, |face| face[0]));
         let mut seeds: Vec<u32> = Vec::new();
         for (i, &f) in direction_seeds.iter().enumerate() {
             if i != 13 && !normals.is_empty() && !seeds.contains(&f) {
@@ -108,19 +114,37 @@ impl HullTopology {
             vertex_neighbours: IndexLists::from_lists(joined),
             seeds,
             direction_seeds,
+            direction_vertices,
         }
     }
 
     /// The seed face whose direction is nearest `u` (any length; each
     /// component rounds to -1, 0 or 1 relative to the largest).
     pub fn seed_towards(&self, u: &Vector3<f64>) -> u32 {
-        let m = u.amax();
-        if m.is_nan() || m <= 0.0 {
-            return self.direction_seeds[0];
-        }
-        let step = |c: f64| ((c / m).round() + 1.0) as usize;
-        self.direction_seeds[step(u.x) + 3 * step(u.y) + 9 * step(u.z)]
+        self.direction_seeds[direction_index(u)]
     }
+}
+
+impl Skeleton for HullTopology {
+    fn neighbours(&self, i: usize) -> &[u32] {
+        self.vertex_neighbours.get(i)
+    }
+
+    fn start_towards(&self, dir: &Vector3<f64>) -> usize {
+        self.direction_vertices[direction_index(dir)] as usize
+    }
+}
+
+/// The index in `{-1, 0, 1}³` (see [`HullTopology::seed_towards`]) of the
+/// direction nearest `u`: each component rounded to -1, 0 or 1 relative to
+/// the largest (0, the first, for a zero or NaN `u`).
+fn direction_index(u: &Vector3<f64>) -> usize {
+    let m = u.amax();
+    if m.is_nan() || m <= 0.0 {
+        return 0;
+    }
+    let step = |c: f64| ((c / m).round() + 1.0) as usize;
+    step(u.x) + 3 * step(u.y) + 9 * step(u.z)
 }
 
 /// For each direction `(i, j, k) ∈ {-1, 0, 1}³` (see
@@ -176,6 +200,10 @@ mod tests {
         assert_eq!(t.seed_towards(&Vector3::new(0.3, -2.0, 0.0)), 1);
         assert_eq!(t.seed_towards(&Vector3::new(-1.0, 0.2, 0.1)), 2);
         assert_eq!(t.seed_towards(&Vector3::new(1.0, 0.9, 1.1)), 3);
+        // A climb towards a direction starts on that direction's seed face.
+        for (dir, face) in [(-Vector3::z(), 0), (-Vector3::x(), 2), (Vector3::repeat(1.0), 3)] {
+            assert!(faces[face].contains(&(t.start_towards(&dir) as u32)));
+        }
         let mut seeds = t.seeds.clone();
         seeds.sort_unstable();
         assert_eq!(seeds, vec![0, 1, 2, 3]);

@@ -197,11 +197,9 @@ fn hull_contact(
     let limit = (prediction + allowance).max(0.0);
     let near = match part.shape.as_support_map() {
         Some(shape) => {
-            let topology = hull.topology();
-            let neighbours = |i: usize| topology.vertex_neighbours.get(i);
             let polytope = Polytope {
                 points: hull.vertices(),
-                neighbours: Some(&neighbours),
+                skeleton: Some(hull.topology()),
             };
             hull_shape_gap(polytope, link_pose, shape, &part.pose, limit)
         }

@@ -138,15 +138,13 @@ fn hull_box_gap_is_sandwiched_by_its_witnesses_and_the_separation_along_them() {
                 pose.translation.vector -= u * (along - target);
             }
             let truth = sat_gap(&hull, &link, &half, &pose);
-            let topology = hull.topology();
-            let neighbours = |i: usize| topology.vertex_neighbours.get(i);
             let climbing = Polytope {
                 points: hull.vertices(),
-                neighbours: Some(&neighbours),
+                skeleton: Some(hull.topology()),
             };
             let scanning = Polytope {
                 points: hull.vertices(),
-                neighbours: None,
+                skeleton: None,
             };
             let gap = hull_shape_gap(climbing, &link, &cuboid, &pose, 0.05);
             // Climbing the skeleton finds what a scan of every vertex finds
