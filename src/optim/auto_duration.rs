@@ -101,7 +101,7 @@ pub fn retimed(
     let started = Instant::now();
     let problem = request.validate(robot)?;
     let weights = DVector::from_column_slice(&explored.weights);
-    let mut report = problem.verify(&weights, ctl).report;
+    let mut report = problem.verifier().verify(&weights, ctl).report;
     if explored.status != Status::Optimal || !problem.is_feasible(&report) {
         return Ok(None);
     }

@@ -31,8 +31,9 @@
 //!   dual active-set method ([`qp::dual_active_set`], Goldfarb–Idnani) that
 //!   solves the intermediate ones ([`qp::active_set`]), and the null-space
 //!   elimination of equality rows ([`qp::nullspace`]).
-//! - [`verify`] — dense verification, the continuous-motion certificate
-//!   ([`verify::continuous`]) and the trajectory output.
+//! - [`verify`] — [`verify::Verifier`]: dense verification and the
+//!   continuous-motion certificate ([`verify::continuous`]) of a problem's
+//!   trajectories; [`Problem::trajectory`] writes the answer's samples.
 //! - [`seeds`] — restarts from detours and seeded prior draws after a local minimum, and
 //!   the `samples: N` projected prior draws.
 //! - [`solution`] — [`Solution`], [`SolveStats`], [`SolveControl`], [`Sharing`];

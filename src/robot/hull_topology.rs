@@ -201,7 +201,11 @@ mod tests {
         assert_eq!(t.seed_towards(&Vector3::new(-1.0, 0.2, 0.1)), 2);
         assert_eq!(t.seed_towards(&Vector3::new(1.0, 0.9, 1.1)), 3);
         // A climb towards a direction starts on that direction's seed face.
-        for (dir, face) in [(-Vector3::z(), 0), (-Vector3::x(), 2), (Vector3::repeat(1.0), 3)] {
+        for (dir, face) in [
+            (-Vector3::z(), 0),
+            (-Vector3::x(), 2),
+            (Vector3::repeat(1.0), 3),
+        ] {
             assert!(faces[face].contains(&(t.start_towards(&dir) as u32)));
         }
         let mut seeds = t.seeds.clone();

@@ -252,7 +252,9 @@ fn a_dip_between_close_samples_is_flagged_pair_by_pair() {
     req.task.obstacles = vec![ball(centre)];
     let problem = req.validate(&robot).unwrap();
     let scene = Scene::new(req.task.obstacles.clone()).unwrap();
-    let v = problem.verify(&DVector::from_column_slice(&w), &Default::default());
+    let v = problem
+        .verifier()
+        .verify(&DVector::from_column_slice(&w), &Default::default());
     assert!(v.report.min_clearance_m.unwrap() >= 0.0, "{:?}", v.report);
     assert!(
         v.report.continuous_clearance_m.unwrap() < 0.0,
@@ -382,7 +384,9 @@ fn the_pairwise_certificate_never_exceeds_the_oversampled_clearance() {
             );
             // A trajectory that dips below the clearance between its
             // samples is told where: some flagged phase for the optimiser.
-            let v = problem.verify(&DVector::from_column_slice(w), &Default::default());
+            let v = problem
+                .verifier()
+                .verify(&DVector::from_column_slice(w), &Default::default());
             if certified < req.task.clearance_m - 1e-6 {
                 assert!(
                     !v.flagged.is_empty(),

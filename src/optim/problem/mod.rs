@@ -10,6 +10,7 @@ use crate::optim::constraints::EndConstraint;
 use crate::optim::problem::linear::LinearSet;
 use crate::optim::problem::phases::PhaseRows;
 use crate::optim::problem::whiten::Whitening;
+use crate::optim::report::{JointTrajectory, TrajectoryFormat, TrajectoryPoint};
 use crate::optim::task::{Goal, SolverOptions};
 use crate::optim::tolerances::FEASIBILITY_TOLERANCE;
 use crate::promp::{Basis, WeightDistribution};
@@ -53,6 +54,41 @@ pub struct Problem {
 }
 
 impl Problem {
+    /// `n_basis x n_joints` weight matrix of joint-major `w`.
+    pub(crate) fn weight_matrix(&self, w: &DVector<f64>) -> DMatrix<f64> {
+        let nb = self.prior.n_basis;
+        DMatrix::from_fn(nb, self.prior.n_joints, |i, j| w[j * nb + i])
+    }
+
+    /// The trajectory of `w` on the request's grid (equal time steps),
+    /// ROS-shaped; accelerations only where the answer's format writes them
+    /// (ROS 2).
+    pub fn trajectory(&self, weights: &[f64]) -> JointTrajectory {
+        let w = DVector::from_column_slice(weights);
+        let wm = self.weight_matrix(&w);
+        let row = |m: DVector<f64>| (m.transpose() * &wm).iter().copied().collect::<Vec<f64>>();
+        let ros2 = self.trajectory_format == TrajectoryFormat::Ros2;
+        let points = self
+            .basis
+            .phases()
+            .iter()
+            .map(|&tau| {
+                let [psi, dpsi, ddpsi, _] = self.warp.time_rows(&self.basis, tau, self.duration);
+                TrajectoryPoint {
+                    positions: row(psi),
+                    velocities: row(dpsi),
+                    accelerations: if ros2 { row(ddpsi) } else { Vec::new() },
+                    time_from_start: tau * self.duration,
+                }
+            })
+            .collect();
+        JointTrajectory {
+            joint_names: self.robot.joint_names().to_vec(),
+            points,
+            format: self.trajectory_format,
+        }
+    }
+
     /// The (repaired) prior.
     pub fn prior(&self) -> &WeightDistribution {
         &self.prior

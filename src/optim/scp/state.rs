@@ -258,7 +258,7 @@ impl<'a> Scp<'a> {
         let p = self.problem;
         let ctl = self.ctl;
         let v = timed(&mut self.stats.verification_ms, || {
-            p.verify(&self.eval.w, ctl)
+            p.verifier().verify(&self.eval.w, ctl)
         });
         if let Some(why) = v.interrupted {
             return self.stopped_early(why, Some(v));
@@ -611,7 +611,7 @@ impl<'a> Scp<'a> {
     ) -> Solution {
         let p = self.problem;
         let stats = std::mem::take(&mut self.stats);
-        let v = verification.unwrap_or_else(|| p.verify(&self.eval.w, self.ctl));
+        let v = verification.unwrap_or_else(|| p.verifier().verify(&self.eval.w, self.ctl));
         let mut report = v.report;
         report.iterations = stats.iterations;
         report.warnings = p.warnings.clone();

@@ -54,6 +54,7 @@
 use crate::optim::problem::Problem;
 use crate::optim::solution::SolveControl;
 use crate::optim::tolerances::FEASIBILITY_TOLERANCE;
+use crate::optim::verify::Verifier;
 use crate::robot::lever::lever_arms_over;
 use crate::robot::{Frames, Robot};
 #[cfg(doc)]
@@ -254,7 +255,7 @@ impl Certificate {
     }
 }
 
-impl Problem {
+impl Verifier<'_> {
     /// Certify the trajectory with weight matrix `wm` (`n_basis × n_joints`)
     /// given its dense samples `q`, `qd` and per-sample clearances (`None`:
     /// at least the activation distance). `None` when `ctl` stopped it
@@ -267,13 +268,13 @@ impl Problem {
         clearance: &[Option<f64>],
         ctl: &SolveControl,
     ) -> Option<Certificate> {
-        let samples: Vec<Sample> = (0..self.dense_phases.len())
+        let samples: Vec<Sample> = (0..self.problem.dense_phases.len())
             .map(|p| {
                 Sample::new(
-                    self.dense_phases[p],
+                    self.problem.dense_phases[p],
                     q.row(p).iter().copied().collect(),
                     qd.row(p).iter().copied().collect(),
-                    clearance[p].unwrap_or(self.activation_m),
+                    clearance[p].unwrap_or(self.problem.activation_m),
                 )
             })
             .collect();
@@ -306,13 +307,13 @@ impl Problem {
     /// configuration-free lever arms, or, unless `enough` accepts that one,
     /// with the arms of the two configurations (one forward kinematics each).
     fn displacement(&self, a: &Sample, b: &Sample, enough: impl Fn(f64) -> bool) -> f64 {
-        let h = (b.z - a.z) * self.duration;
+        let h = (b.z - a.z) * self.problem.duration;
         let path = path_lengths(&a.q, &b.q, &a.qd, &b.qd, h);
-        let free = dot(self.robot.lever_arms(), &path);
+        let free = dot(self.problem.robot.lever_arms(), &path);
         if enough(free) {
             return free;
         }
-        let robot = &self.robot;
+        let robot = &self.problem.robot;
         displacement_bound_between(robot, a.arms(robot), b.arms(robot), &path)
     }
 
@@ -328,7 +329,7 @@ impl Problem {
         depth: usize,
         out: &mut Certificate,
     ) {
-        let required = self.clearance_m - FEASIBILITY_TOLERANCE;
+        let required = self.problem.clearance_m - FEASIBILITY_TOLERANCE;
         let ends_ok = a.clearance >= required && b.clearance >= required;
         let displacement =
             self.displacement(a, b, |d| !ends_ok || interval_bound(a, b, d) >= required);
@@ -353,7 +354,11 @@ impl Problem {
             out.flag_interval(a.z, b.z);
             return;
         }
-        let beyond = pair_bound(self.activation_m, self.activation_m, displacement);
+        let beyond = pair_bound(
+            self.problem.activation_m,
+            self.problem.activation_m,
+            displacement,
+        );
         if beyond >= required {
             out.accept(beyond, displacement);
             let open = self.open_pairs(a, b, displacement, required, out);
@@ -376,9 +381,9 @@ impl Problem {
         required: f64,
         out: &mut Certificate,
     ) -> Vec<OpenPair> {
-        let cap = self.activation_m;
+        let cap = self.problem.activation_m;
         let mut pairs: Vec<OpenPair> = a
-            .pairs(self)
+            .pairs(self.problem)
             .iter()
             .map(|pa| OpenPair {
                 shape: pa.shape,
@@ -387,7 +392,7 @@ impl Problem {
                 b: cap,
             })
             .collect();
-        for pb in b.pairs(self) {
+        for pb in b.pairs(self.problem) {
             match pairs
                 .iter_mut()
                 .find(|o| (o.shape, o.obstacle) == (pb.shape, pb.obstacle))
@@ -433,20 +438,20 @@ impl Problem {
             return;
         }
         let mid = self.bare_sample_at(wm, z);
-        let frames = mid.frames(&self.robot);
+        let frames = mid.frames(&self.problem.robot);
         let at_mid: Vec<f64> = open
             .iter()
             .map(|o| {
-                self.scene.pair_distance_below(
-                    &self.robot,
+                self.problem.scene.pair_distance_below(
+                    &self.problem.robot,
                     frames,
                     o.shape,
                     o.obstacle,
-                    self.activation_m,
+                    self.problem.activation_m,
                 )
             })
             .collect();
-        let required = self.clearance_m - FEASIBILITY_TOLERANCE;
+        let required = self.problem.clearance_m - FEASIBILITY_TOLERANCE;
         if at_mid.iter().any(|&m| m < required) {
             // The trajectory dips below the clearance between the samples:
             // the optimiser must see this phase, as for a full midpoint.
@@ -480,12 +485,15 @@ impl Problem {
 
     /// Positions and velocities at phase `z` (the rest computed on demand).
     fn bare_sample_at(&self, wm: &DMatrix<f64>, z: f64) -> Sample {
-        let [psi, dpsi, ..] = self.warp.time_rows(&self.basis, z, self.duration);
+        let [psi, dpsi, ..] =
+            self.problem
+                .warp
+                .time_rows(&self.problem.basis, z, self.problem.duration);
         Sample::new(
             z,
             (wm.transpose() * psi).iter().copied().collect(),
             (wm.transpose() * dpsi).iter().copied().collect(),
-            self.activation_m,
+            self.problem.activation_m,
         )
     }
 
@@ -494,9 +502,14 @@ impl Problem {
     fn sample_at(&self, wm: &DMatrix<f64>, z: f64) -> Sample {
         let mut s = self.bare_sample_at(wm, z);
         s.clearance = self
+            .problem
             .scene
-            .closest_within(&self.robot, s.frames(&self.robot), self.activation_m)
-            .map_or(self.activation_m, |c| c.distance);
+            .closest_within(
+                &self.problem.robot,
+                s.frames(&self.problem.robot),
+                self.problem.activation_m,
+            )
+            .map_or(self.problem.activation_m, |c| c.distance);
         s
     }
 }

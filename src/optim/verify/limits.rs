@@ -17,8 +17,8 @@
 //! optimiser constrains the peak itself; the next peak lies next to it and
 //! differs from it in the second order.
 
-use crate::optim::problem::Problem;
 use crate::optim::tolerances::FEASIBILITY_TOLERANCE;
+use crate::optim::verify::Verifier;
 use nalgebra::DMatrix;
 
 /// Width (time fraction) to which a velocity root is found: the position
@@ -40,13 +40,13 @@ pub struct LimitPeaks {
     pub flagged: Vec<f64>,
 }
 
-impl Problem {
+impl Verifier<'_> {
     /// Every interior extremum of every joint between the dense samples
     /// against the joint's limits; `wm` is the weight matrix (`n_basis ×
     /// n_joints`), `qd` the dense velocities.
     pub(crate) fn limit_peaks(&self, wm: &DMatrix<f64>, qd: &DMatrix<f64>) -> LimitPeaks {
         let mut out = LimitPeaks::default();
-        let phases = &self.dense_phases;
+        let phases = &self.problem.dense_phases;
         for j in 0..wm.ncols() {
             for p in 0..phases.len().saturating_sub(1) {
                 let (va, vb) = (qd[(p, j)], qd[(p + 1, j)]);
@@ -55,7 +55,8 @@ impl Problem {
                 }
                 let tau = self.velocity_root(wm, j, phases[p], phases[p + 1], va > 0.0);
                 let q = self.joint_position(wm, j, tau);
-                let excess = (q - self.linear.upper[j]).max(self.linear.lower[j] - q);
+                let excess =
+                    (q - self.problem.linear.upper[j]).max(self.problem.linear.lower[j] - q);
                 out.excess = out.excess.max(excess);
                 if excess > FEASIBILITY_TOLERANCE {
                     out.flagged.push(tau);
@@ -115,12 +116,18 @@ impl Problem {
     }
 
     fn joint_position(&self, wm: &DMatrix<f64>, j: usize, tau: f64) -> f64 {
-        let [psi, ..] = self.warp.time_rows(&self.basis, tau, self.duration);
+        let [psi, ..] =
+            self.problem
+                .warp
+                .time_rows(&self.problem.basis, tau, self.problem.duration);
         psi.dot(&wm.column(j))
     }
 
     fn joint_velocity(&self, wm: &DMatrix<f64>, j: usize, tau: f64) -> f64 {
-        let [_, dpsi, ..] = self.warp.time_rows(&self.basis, tau, self.duration);
+        let [_, dpsi, ..] =
+            self.problem
+                .warp
+                .time_rows(&self.problem.basis, tau, self.problem.duration);
         dpsi.dot(&wm.column(j))
     }
 }
@@ -150,11 +157,11 @@ mod tests {
                 }
                 reversals += 1;
                 let (lo, hi) = (p.dense_phases[k], p.dense_phases[k + 1]);
-                let root = p.velocity_root(&wm, j, lo, hi, va > 0.0);
+                let root = p.verifier().velocity_root(&wm, j, lo, hi, va > 0.0);
                 let (mut a, mut b) = (lo, hi);
                 for _ in 0..60 {
                     let mid = 0.5 * (a + b);
-                    if (p.joint_velocity(&wm, j, mid) > 0.0) == (va > 0.0) {
+                    if (p.verifier().joint_velocity(&wm, j, mid) > 0.0) == (va > 0.0) {
                         a = mid;
                     } else {
                         b = mid;

@@ -5,6 +5,10 @@
 //! joint's peaks and troughs between them against its position limits
 //! ([`crate::optim::verify::limits`]). The report the user sees always
 //! comes from here.
+//!
+//! The checks live on [`Verifier`] (a problem's [`Problem::verifier`]), apart
+//! from the problem's data and from the solver that asks them; the public
+//! [`Problem::evaluate`] is a [`Verifier::verify`]'s report.
 
 pub mod continuous;
 pub mod limits;
@@ -12,9 +16,7 @@ pub mod limits;
 use crate::optim::problem::linear::RATE_BUFFER;
 use crate::optim::problem::phases::Derivative;
 use crate::optim::problem::Problem;
-use crate::optim::report::{
-    Closest, JointTrajectory, TrajectoryFormat, TrajectoryPoint, TrajectoryReport,
-};
+use crate::optim::report::{Closest, TrajectoryReport};
 use crate::optim::solution::SolveControl;
 use crate::optim::tolerances::FEASIBILITY_TOLERANCE;
 use crate::scene::Clearance;
@@ -36,11 +38,18 @@ pub struct Verification {
     pub interrupted: Option<crate::optim::stop_reason::Interruption>,
 }
 
+/// The dense and continuous checks of a [`Problem`]'s trajectories: what
+/// the SCP asks before it calls an iterate `optimal`, and what every
+/// answer's report comes from. It reads the problem, never changes it.
+#[derive(Clone, Copy, Debug)]
+pub struct Verifier<'a> {
+    problem: &'a Problem,
+}
+
 impl Problem {
-    /// `n_basis x n_joints` weight matrix of joint-major `w`.
-    pub(crate) fn weight_matrix(&self, w: &DVector<f64>) -> DMatrix<f64> {
-        let nb = self.prior.n_basis;
-        DMatrix::from_fn(nb, self.prior.n_joints, |i, j| w[j * nb + i])
+    /// The verifier of this problem's trajectories.
+    pub fn verifier(&self) -> Verifier<'_> {
+        Verifier { problem: self }
     }
 
     /// Dense verification of any candidate weights (length must be the
@@ -52,16 +61,19 @@ impl Problem {
     /// [`Problem::evaluate`] that stops at `ctl`'s deadline or cancel flag
     /// (see [`Verification::interrupted`]).
     pub fn evaluate_with(&self, weights: &[f64], ctl: &SolveControl) -> TrajectoryReport {
-        self.verify(&DVector::from_column_slice(weights), ctl)
+        self.verifier()
+            .verify(&DVector::from_column_slice(weights), ctl)
             .report
     }
+}
 
+impl Verifier<'_> {
     /// Dense verification with the violated phases. The limit, rate and
     /// goal figures are matrix products and always computed; the clearance
     /// part (forward kinematics and distances at every dense phase, then the
     /// continuous certificate) checks `ctl` as it goes and stops with it.
     pub fn verify(&self, w: &DVector<f64>, ctl: &SolveControl) -> Verification {
-        if w.len() != self.prior.dim() || w.iter().any(|v| !v.is_finite()) {
+        if w.len() != self.problem.prior.dim() || w.iter().any(|v| !v.is_finite()) {
             return Verification {
                 report: TrajectoryReport {
                     max_joint_limit_violation_rad: f64::INFINITY,
@@ -73,16 +85,16 @@ impl Problem {
                 interrupted: None,
             };
         }
-        let wm = self.weight_matrix(w);
-        let q = &self.dense[0] * &wm;
-        let qd = &self.dense[1] * &wm;
-        let mut flagged = vec![false; self.dense_phases.len()];
+        let wm = self.problem.weight_matrix(w);
+        let q = &self.problem.dense[0] * &wm;
+        let qd = &self.problem.dense[1] * &wm;
+        let mut flagged = vec![false; self.problem.dense_phases.len()];
         let limit = self.limit_violation(&q, &mut flagged);
         let peaks = self.limit_peaks(&wm, &qd);
         let ratio = self.rate_ratio(Derivative::Velocity, &qd, &mut flagged);
         let mut limited_ratio = |d: Derivative| {
-            self.linear.rate_bound(d, 0).map(|_| {
-                let m = &self.dense[d.order()] * &wm;
+            self.problem.linear.rate_bound(d, 0).map(|_| {
+                let m = &self.problem.dense[d.order()] * &wm;
                 self.rate_ratio(d, &m, &mut flagged)
             })
         };
@@ -113,22 +125,23 @@ impl Problem {
             verified_samples: if interrupted.is_some() {
                 0
             } else {
-                self.dense_phases.len()
+                self.problem.dense_phases.len()
             },
-            equality_error_rad: self.linear.equality_error(&self.ends, w),
+            equality_error_rad: self.problem.linear.equality_error(&self.problem.ends, w),
             weight_bound_excess: self
+                .problem
                 .linear
-                .weight_bound_excess(w, self.prior.n_basis)
+                .weight_bound_excess(w, self.problem.prior.n_basis)
                 .max(0.0),
             ..Default::default()
         };
-        for c in &self.end_constraints {
-            let q = self.ends.position(c.phase(), w);
-            c.report(&self.robot, &q, &mut report);
+        for c in &self.problem.end_constraints {
+            let q = self.problem.ends.position(c.phase(), w);
+            c.report(&self.problem.robot, &q, &mut report);
         }
         let mut flagged: Vec<f64> = flagged
             .iter()
-            .zip(&self.dense_phases)
+            .zip(&self.problem.dense_phases)
             .filter(|(f, _)| **f)
             .map(|(_, p)| *p)
             .collect();
@@ -160,7 +173,8 @@ impl Problem {
         for (p, flag) in flagged.iter_mut().enumerate() {
             for j in 0..q.ncols() {
                 let v = q[(p, j)];
-                let excess = (v - self.linear.upper[j]).max(self.linear.lower[j] - v);
+                let excess =
+                    (v - self.problem.linear.upper[j]).max(self.problem.linear.lower[j] - v);
                 if excess > FEASIBILITY_TOLERANCE {
                     *flag = true;
                 }
@@ -184,7 +198,11 @@ impl Problem {
         let mut worst: f64 = 0.0;
         for (p, flag) in flagged.iter_mut().enumerate() {
             for j in 0..values.ncols() {
-                let bound = self.linear.rate_bound(d, j).unwrap_or(f64::INFINITY);
+                let bound = self
+                    .problem
+                    .linear
+                    .rate_bound(d, j)
+                    .unwrap_or(f64::INFINITY);
                 let ratio = values[(p, j)].abs() / bound;
                 if ratio > flag_above {
                     *flag = true;
@@ -205,29 +223,34 @@ impl Problem {
         flagged: &mut [bool],
         ctl: &SolveControl,
     ) -> Option<DenseClearance> {
-        if self.scene.is_empty() {
+        if self.problem.scene.is_empty() {
             return Some((None, None, Vec::new()));
         }
         let rows: Vec<Vec<f64>> = (0..q.nrows())
             .map(|p| q.row(p).iter().cloned().collect())
             .collect();
         let near: Vec<Option<Clearance>> = per_row_unless_stopped(&rows, ctl, |qp| {
-            let frames = self.robot.fk(qp);
-            self.scene
-                .closest_within(&self.robot, &frames, self.activation_m)
+            let frames = self.problem.robot.fk(qp);
+            self.problem.scene.closest_within(
+                &self.problem.robot,
+                &frames,
+                self.problem.activation_m,
+            )
         })?;
         let per_phase: Vec<Option<Clearance>> = if near.iter().any(|c| c.is_some()) {
             near
         } else {
             per_row_unless_stopped(&rows, ctl, |qp| {
-                let frames = self.robot.fk(qp);
-                self.scene.min_clearance(&self.robot, &frames)
+                let frames = self.problem.robot.fk(qp);
+                self.problem
+                    .scene
+                    .min_clearance(&self.problem.robot, &frames)
             })?
         };
         let mut best: Option<(usize, &Clearance)> = None;
         for (p, c) in per_phase.iter().enumerate() {
             if let Some(c) = c {
-                if c.distance < self.clearance_m - FEASIBILITY_TOLERANCE {
+                if c.distance < self.problem.clearance_m - FEASIBILITY_TOLERANCE {
                     flagged[p] = true;
                 }
                 if best.is_none_or(|(_, b)| c.distance < b.distance) {
@@ -244,42 +267,13 @@ impl Problem {
             Some((p, c)) => (
                 Some(c.distance),
                 Some(Closest {
-                    link: c.link_name(&self.robot).to_string(),
-                    obstacle: c.obstacle_id(&self.scene).to_string(),
-                    time_s: self.dense_phases[p] * self.duration,
+                    link: c.link_name(&self.problem.robot).to_string(),
+                    obstacle: c.obstacle_id(&self.problem.scene).to_string(),
+                    time_s: self.problem.dense_phases[p] * self.problem.duration,
                 }),
                 distances,
             ),
         })
-    }
-
-    /// The trajectory of `w` on the request's grid (equal time steps),
-    /// ROS-shaped; accelerations only where the answer's format writes them
-    /// (ROS 2).
-    pub fn trajectory(&self, weights: &[f64]) -> JointTrajectory {
-        let w = DVector::from_column_slice(weights);
-        let wm = self.weight_matrix(&w);
-        let row = |m: DVector<f64>| (m.transpose() * &wm).iter().copied().collect::<Vec<f64>>();
-        let ros2 = self.trajectory_format == TrajectoryFormat::Ros2;
-        let points = self
-            .basis
-            .phases()
-            .iter()
-            .map(|&tau| {
-                let [psi, dpsi, ddpsi, _] = self.warp.time_rows(&self.basis, tau, self.duration);
-                TrajectoryPoint {
-                    positions: row(psi),
-                    velocities: row(dpsi),
-                    accelerations: if ros2 { row(ddpsi) } else { Vec::new() },
-                    time_from_start: tau * self.duration,
-                }
-            })
-            .collect();
-        JointTrajectory {
-            joint_names: self.robot.joint_names().to_vec(),
-            points,
-            format: self.trajectory_format,
-        }
     }
 }
 
