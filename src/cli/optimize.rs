@@ -2,6 +2,7 @@
 //! print the response JSON; optionally plot prior band, prior mean and the
 //! optimised trajectory per joint.
 
+use crate::optim::finer_basis::on_answer_basis;
 use crate::optim::{optimize, OptimizeRequest, OptimizeResponse, Problem};
 use crate::plot::{format_of, prior_and_answer, PriorBand};
 use crate::{Error, Result};
@@ -34,7 +35,7 @@ pub fn run(args: OptimizeArgs) -> Result<()> {
     let request = read_request(&args.request)?;
     let response = optimize(&request, &robot).map_err(|e| in_file(e, &args.request))?;
     if let Some(plot) = &args.plot {
-        let problem = request
+        let problem = on_answer_basis(&request, &response)
             .validate(&robot)
             .map_err(|e| in_file(e, &args.request))?;
         plot_response(plot, &problem, &response)?;

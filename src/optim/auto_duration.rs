@@ -63,6 +63,8 @@ pub fn optimize_auto_duration(
     if explored.status != Status::Optimal {
         return Ok(explored);
     }
+    // A finer basis found the explored answer: its weights are on it.
+    let mut at = super::finer_basis::on_answer_basis(&at, &explored);
     let mut duration = round_up_ms(explore * time_scale_to_limits(&explored).max(1e-3));
     while duration * AUTO_DURATION_STEP < explore && !ctl.should_stop() {
         at.task.duration_s = duration;
@@ -125,6 +127,7 @@ pub fn retimed(
         min_duration_s: None,
         duration_lower_bound_s: None,
         culprit: None,
+        promp: explored.promp.clone(),
     }))
 }
 

@@ -48,6 +48,7 @@
 
 pub mod auto_duration;
 mod constraints;
+pub mod finer_basis;
 pub mod infeasible;
 pub mod problem;
 pub mod qp;
@@ -88,14 +89,22 @@ pub fn optimize(request: &OptimizeRequest, robot: &Robot) -> Result<OptimizeResp
 /// solve with its restarts, the duration search and the samples. A stopped
 /// solve answers status `max_iterations` with a warning. `report.solve_ms`
 /// is the whole call's wall time.
+///
+/// With the smoothness prior on its default basis, a solve that finds no
+/// certified answer is tried again on finer bases
+/// ([`finer_basis::refine`]).
 pub fn optimize_with(
     request: &OptimizeRequest,
     robot: &Robot,
     ctl: &SolveControl,
 ) -> Result<OptimizeResponse> {
-    respond(&request.task, ctl, &|task: &Task| {
-        request::validate_spec(&request.prior, task, robot)
-    })
+    let on_its_basis = |request: &OptimizeRequest| {
+        respond(&request.task, ctl, &|task: &Task| {
+            request::validate_spec(&request.prior, task, robot)
+        })
+    };
+    let answer = on_its_basis(request)?;
+    finer_basis::refine(request, answer, ctl, &on_its_basis)
 }
 
 /// [`optimize_with`] for a prior that is already a distribution (the
@@ -156,6 +165,7 @@ fn respond(
             min_duration_s: None,
             duration_lower_bound_s: None,
             culprit: None,
+            promp: None,
         }
     };
     response.report.solve_ms = started.elapsed().as_secs_f64() * 1e3;
@@ -194,6 +204,7 @@ fn infeasible_at_prior_mean(
         min_duration_s: None,
         duration_lower_bound_s: None,
         culprit: None,
+        promp: None,
     }
 }
 

@@ -374,6 +374,11 @@ pub struct OptimizeResponse {
     /// words; MoveIt's error codes map it).
     #[serde(skip)]
     pub culprit: Option<Culprit>,
+    /// The basis `weights` are on when it is not the request's: the
+    /// smoothness prior's default basis left no certified answer and a
+    /// finer one found it ([`super::finer_basis`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub promp: Option<crate::promp::PrompConfig>,
 }
 
 impl OptimizeResponse {

@@ -216,6 +216,10 @@ pub struct SolverOptions {
     /// Which solver takes the intermediate SCP iterations; the final QP
     /// of an `optimal` answer is Clarabel's either way.
     pub inner_solver: InnerSolver,
+    /// With the smoothness prior on its default basis: when the solve
+    /// finds no certified answer, solve again on finer bases
+    /// ([`crate::optim::finer_basis`]; default true).
+    pub refine_basis: bool,
 }
 
 /// The solver of the intermediate SCP iterations.
@@ -245,6 +249,7 @@ impl Default for SolverOptions {
             qp_tolerance: 1e-8,
             final_configuration: None,
             inner_solver: InnerSolver::default(),
+            refine_basis: true,
         }
     }
 }

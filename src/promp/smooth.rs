@@ -66,9 +66,16 @@ pub const SMOOTH_WIDTH_PER_SPACING: f64 = 1.0;
 /// variance lies in weight directions that cancel in the motion, and the
 /// smoothest motion is only found to ~1e-8 rad. At one spacing it is ~40.
 pub fn smooth_basis_config() -> PrompConfig {
-    let sigma = SMOOTH_WIDTH_PER_SPACING / (SMOOTH_N_BASIS - 1) as f64;
+    smooth_basis_config_with(SMOOTH_N_BASIS)
+}
+
+/// The smoothness prior's basis with `n_basis` functions (at least 2),
+/// spread as [`smooth_basis_config`]'s: each Gaussian's standard deviation
+/// the spacing of their centres.
+pub fn smooth_basis_config_with(n_basis: usize) -> PrompConfig {
+    let sigma = SMOOTH_WIDTH_PER_SPACING / (n_basis.max(2) - 1) as f64;
     PrompConfig {
-        n_basis: SMOOTH_N_BASIS,
+        n_basis,
         width: (sigma * sigma * 1e9).round() / 1e9,
         n_samples: PrompConfig::default().n_samples,
     }

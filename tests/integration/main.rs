@@ -32,6 +32,7 @@ mod optim_continuous;
 mod optim_determinism;
 mod optim_dual_active_set;
 mod optim_exactness;
+mod optim_finer_basis;
 mod optim_franka;
 mod optim_global;
 mod optim_properties;
