@@ -100,11 +100,14 @@ pub fn retimed(
     ctl: &SolveControl,
     explored: &OptimizeResponse,
 ) -> Result<Option<OptimizeResponse>> {
+    if explored.status != Status::Optimal {
+        return Ok(None);
+    }
     let started = Instant::now();
     let problem = request.validate(robot)?;
     let weights = DVector::from_column_slice(&explored.weights);
     let mut report = problem.verifier().verify(&weights, ctl).report;
-    if explored.status != Status::Optimal || !problem.is_feasible(&report) {
+    if !problem.is_feasible(&report) {
         return Ok(None);
     }
     let mut warnings = explored.report.warnings.clone();

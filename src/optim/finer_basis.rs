@@ -43,9 +43,10 @@ use std::time::Instant;
 /// The finer bases tried in turn (functions per joint). Measured on the
 /// MotionBenchMaker problems the default basis left uncertified
 /// (docs/experiments.md): 16, 20 and 24 functions each certified about half
-/// of them, different halves; two steps cost at most two more solves on a
-/// request that had failed.
-pub const FINER_BASES: [usize; 2] = [20, 24];
+/// of them, different halves, and of those 20 and 24 left, 16, 28 and 32
+/// two or three each; each step costs one more solve on a request that had
+/// failed.
+pub const FINER_BASES: [usize; 3] = [20, 24, 28];
 
 /// Whether a failed solve of `request` is tried again on finer bases: the
 /// smoothness prior on its default basis, with `options.refine_basis`.

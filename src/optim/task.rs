@@ -218,8 +218,14 @@ pub struct SolverOptions {
     pub inner_solver: InnerSolver,
     /// With the smoothness prior on its default basis: when the solve
     /// finds no certified answer, solve again on finer bases
-    /// ([`crate::optim::finer_basis`]; default true).
+    /// ([`crate::optim::finer_basis`]; default true, written only when
+    /// false).
+    #[serde(skip_serializing_if = "is_true")]
     pub refine_basis: bool,
+}
+
+fn is_true(v: &bool) -> bool {
+    *v
 }
 
 /// The solver of the intermediate SCP iterations.
