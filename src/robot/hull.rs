@@ -21,6 +21,7 @@
 
 use super::hull_topology::HullTopology;
 use super::mesh::TriangleMesh;
+use crate::geometry::convex_gap::Polytope;
 use crate::geometry::slabs::cube_directions;
 use crate::geometry::{point_segment_distance, Slabs};
 use nalgebra::{Point3, Vector3};
@@ -249,6 +250,15 @@ impl ConvexHull {
     /// Which faces touch which (for the local query).
     pub fn topology(&self) -> &HullTopology {
         &self.0.topology
+    }
+
+    /// The hull as a polytope whose support points climb its skeleton
+    /// (for [`crate::geometry::convex_gap::hull_shape_gap`]).
+    pub fn polytope(&self) -> Polytope<'_> {
+        Polytope {
+            points: self.vertices(),
+            skeleton: Some(self.topology()),
+        }
     }
 
     /// A ball `(centre, radius)` around every face, in face order.

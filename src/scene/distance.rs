@@ -6,7 +6,7 @@ use super::clip::{near_piece, Cut};
 use super::contact::PairContact;
 use super::round_contact::round_contact;
 use super::shape::{from_glam, parry_pose_relative, to_glam, LocalShape, Part, RobotPart};
-use crate::geometry::convex_gap::{hull_shape_gap, ConvexGap, Polytope};
+use crate::geometry::convex_gap::{hull_shape_gap, ConvexGap};
 use crate::robot::hull::ConvexHull;
 use nalgebra::{Isometry3, Point3, Vector3};
 
@@ -196,13 +196,7 @@ fn hull_contact(
     // hull overlaps it, so no containment check is needed.
     let limit = (prediction + allowance).max(0.0);
     let near = match part.shape.as_support_map() {
-        Some(shape) => {
-            let polytope = Polytope {
-                points: hull.vertices(),
-                skeleton: Some(hull.topology()),
-            };
-            hull_shape_gap(polytope, link_pose, shape, &part.pose, limit)
-        }
+        Some(shape) => hull_shape_gap(hull.polytope(), link_pose, shape, &part.pose, limit),
         None => ConvexGap::Overlapping,
     };
     let (guess, witnesses) = match near {

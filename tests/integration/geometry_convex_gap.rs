@@ -138,10 +138,7 @@ fn hull_box_gap_is_sandwiched_by_its_witnesses_and_the_separation_along_them() {
                 pose.translation.vector -= u * (along - target);
             }
             let truth = sat_gap(&hull, &link, &half, &pose);
-            let climbing = Polytope {
-                points: hull.vertices(),
-                skeleton: Some(hull.topology()),
-            };
+            let climbing = hull.polytope();
             let scanning = Polytope {
                 points: hull.vertices(),
                 skeleton: None,
