@@ -28,6 +28,8 @@ pub struct OptimizeArgs {
 
 /// Run `dpmp optimize`.
 pub fn run(args: OptimizeArgs) -> Result<()> {
+    // The optimiser's stages log at `debug`; `RUST_LOG=dpmp=debug` shows them.
+    super::serve::init_logging_with(false, "warn");
     if let Some(plot) = &args.plot {
         format_of(plot, "--plot")?;
     }

@@ -37,6 +37,8 @@ pub struct PlanMoveItArgs {
 
 /// Run `dpmp plan-moveit`.
 pub fn run(args: PlanMoveItArgs) -> Result<()> {
+    // The optimiser's stages log at `debug`; `RUST_LOG=dpmp=debug` shows them.
+    super::serve::init_logging_with(false, "warn");
     let robot = args.robot.load()?;
     let options = MoveItPlanOptions {
         prior: match &args.prior {

@@ -7,6 +7,9 @@
 //!   its conversions to and from nalgebra;
 //! - [`slabs`]: the k-DOP around a point set, a cheap lower bound on the
 //!   distance to its convex hull;
+//! - [`rounded_box`]: an oriented box grown by a radius, and a cheap lower
+//!   bound on the distance between two (the scene's pre-check before its
+//!   exact queries);
 //! - [`segment`]: closest points and distances between segments and points
 //!   (the kernel of capsule, hull and broad-phase distances);
 //! - [`convex_gap`]: the closest points of a point cloud's hull and a
@@ -16,10 +19,12 @@
 pub mod convex_gap;
 pub mod primitive;
 pub mod quaternion;
+pub mod rounded_box;
 pub mod segment;
 pub mod slabs;
 
 pub use primitive::{midpoint, Capsule, OrientedBox, Primitive, Sphere};
+pub use rounded_box::RoundedBox;
 pub use segment::{closest_segments, point_segment_distance, segment_distance};
 pub use slabs::Slabs;
 

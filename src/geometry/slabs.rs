@@ -14,6 +14,7 @@
 //! one of them. [`Slabs::placed`] moves them with a rigid motion once per
 //! query, so a point or a box costs only the dot products.
 
+use super::rounded_box::RoundedBox;
 use nalgebra::{Isometry3, Vector3};
 
 /// The 26 unit directions of a cube's 6 faces, 12 edges and 8 corners.
@@ -135,6 +136,14 @@ impl Slabs {
     }
 
     /// `max_k (low(u_k) − o_k)`.
+    /// Lower bound on the distance from the k-DOP to `b` (in the k-DOP's
+    /// frame): the largest gap between their extents along the k-DOP's
+    /// directions.
+    #[inline]
+    pub fn rounded_box_gap(&self, b: &RoundedBox) -> f64 {
+        self.max_over(|u| u.dot(&b.centre) - b.reach(u))
+    }
+
     #[inline]
     fn max_over(&self, low: impl Fn(&Vector3<f64>) -> f64) -> f64 {
         self.normals

@@ -7,6 +7,7 @@ use super::contact::PairContact;
 use super::round_contact::round_contact;
 use super::shape::{from_glam, parry_pose_relative, to_glam, LocalShape, Part, RobotPart};
 use crate::geometry::convex_gap::{hull_shape_gap, ConvexGap};
+use crate::geometry::RoundedBox;
 use crate::robot::hull::ConvexHull;
 use nalgebra::{Isometry3, Point3, Vector3};
 
@@ -18,6 +19,9 @@ use nalgebra::{Isometry3, Point3, Vector3};
 /// the robot primitive's origin so that parry's `f32` arithmetic only sees
 /// small coordinates.
 pub fn pair_contact(robot: &RobotPart, part: &Part, prediction: f64) -> Option<PairContact> {
+    if boxes_rule_out(robot, part, prediction) {
+        return None;
+    }
     let piece;
     let part = match part.long {
         None => part,
@@ -228,6 +232,62 @@ fn hull_contact(
         point_obstacle,
         normal,
     })
+}
+
+/// Whether a cheap lower bound puts `part` (a box or a cylinder, by its
+/// bounding box) at least `prediction` from `robot`: the hull's k-DOP and
+/// bounding capsule, or the primitive's rounded box, against the part's
+/// box ([`RoundedBox`]), less the robot part's allowance. Most pairs the
+/// broad phase keeps near a long board or a box are settled here, before
+/// the exact query.
+fn boxes_rule_out(robot: &RobotPart, part: &Part, prediction: f64) -> bool {
+    let Some(part_box) = part_box(part) else {
+        return false;
+    };
+    let gap = match robot {
+        RobotPart::Convex(hull, link_pose, _) => {
+            let local = part_box.transformed(&link_pose.inverse());
+            let (a, b, r) = hull.bound();
+            let capsule = RoundedBox::capsule(&Vector3::from(a), &Vector3::from(b), r);
+            hull.slabs()
+                .rounded_box_gap(&local)
+                .max(capsule.gap(&local))
+        }
+        RobotPart::Primitive(shape, pose) => primitive_box(shape, pose).gap(&part_box),
+    } - robot.allowance();
+    gap >= prediction && gap > 0.0
+}
+
+/// The box around a box or cylinder part (base frame; parry's `f32`
+/// extents rounded outwards); `None` for other shapes.
+fn part_box(part: &Part) -> Option<RoundedBox> {
+    let half = if let Some(c) = part.shape.as_cuboid() {
+        from_glam(c.half_extents)
+    } else if let Some(c) = part.shape.as_cylinder() {
+        let (r, h) = (c.radius as f64, c.half_height as f64);
+        Vector3::new(r, h, r)
+    } else {
+        return None;
+    };
+    Some(RoundedBox::placed(&part.pose, outward(half)))
+}
+
+/// A robot primitive as a rounded box (base frame).
+fn primitive_box(shape: &LocalShape, pose: &Isometry3<f64>) -> RoundedBox {
+    let (half, radius) = match shape {
+        LocalShape::Ball(b) => (Vector3::zeros(), b.radius as f64),
+        LocalShape::Capsule(c) => (from_glam(c.segment.b).abs(), c.radius as f64),
+        LocalShape::Cuboid(c) => (from_glam(c.half_extents), 0.0),
+    };
+    RoundedBox {
+        radius: outward(Vector3::repeat(radius)).x,
+        ..RoundedBox::placed(pose, outward(half))
+    }
+}
+
+/// `f32` extents grown past their rounding.
+fn outward(v: Vector3<f64>) -> Vector3<f64> {
+    v * (1.0 + 1e-6) + Vector3::repeat(1e-9)
 }
 
 /// The separation `min_{y ∈ part} u·y − max_{x ∈ hull} u·x` along
