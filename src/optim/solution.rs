@@ -98,6 +98,10 @@ pub struct SolveStats {
     pub max_qp_variables: usize,
     /// Phases added by dense verification.
     pub added_phases: usize,
+    /// Converged iterates verified densely before certification (after a
+    /// dip between the phases), and how many of those answered with the
+    /// screen's own verification (certification left the point in place).
+    pub screens: (usize, usize),
     /// Final L1 penalty.
     pub final_penalty: f64,
     /// Wall time building and solving QPs (ms).
@@ -139,6 +143,8 @@ impl SolveStats {
         self.max_qp_rows = self.max_qp_rows.max(later.max_qp_rows);
         self.max_qp_variables = self.max_qp_variables.max(later.max_qp_variables);
         self.added_phases += later.added_phases;
+        self.screens.0 += later.screens.0;
+        self.screens.1 += later.screens.1;
         self.final_penalty = later.final_penalty;
         self.qp_ms += later.qp_ms;
         self.clarabel_ms += later.clarabel_ms;

@@ -10,24 +10,16 @@
 use dpmp::bench::hard_set::real::make_real_one;
 use dpmp::bench::hard_set::{make_hard_one, HARD_CLEARANCE_M};
 use dpmp::bench::problem_file::HARD_CATEGORY;
-use dpmp::bench::{load_dir, ProblemFile};
+use dpmp::bench::ProblemFile;
 use dpmp::optim::OptimizeRequest;
 use dpmp::promp::annotation::JointAnnotation;
 use dpmp::robot::Robot;
-use std::path::PathBuf;
 
 /// Targets of the paper's annotations.
 const REAL_TARGETS: usize = 25;
 
 fn load_all(set: &str) -> Vec<ProblemFile> {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("problems")
-        .join(set);
-    load_dir(&dir)
-        .unwrap()
-        .into_iter()
-        .map(|(name, p)| p.unwrap_or_else(|e| panic!("{name}: {e}")))
-        .collect()
+    crate::common::requests::problem_set(set)
 }
 
 /// Asserts every problem's prior mean is blocked and every witness

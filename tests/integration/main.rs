@@ -37,6 +37,7 @@ mod optim_franka;
 mod optim_global;
 mod optim_properties;
 mod optim_requests;
+mod optim_screening;
 mod optim_smooth_prior;
 mod optim_task;
 mod plan_interfaces;

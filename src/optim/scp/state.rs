@@ -8,7 +8,11 @@
 //!
 //! 1. [`Scp::finish_or_certify`] — a converged feasible iterate is
 //!    *certified* first (the next QP is Clarabel's: see below), then
-//!    verified densely; flagged phases join the optimisation set;
+//!    verified densely; flagged phases join the optimisation set. Once a
+//!    verification has flagged phases (the trajectory dipped between
+//!    them), a converged iterate is verified first ([`Scp::screen`]) and
+//!    certified only when clean, so a point that would be flagged costs no
+//!    certifying QPs;
 //! 2. [`Scp::out_of_budget`] — the caller's deadline / cancel flag and the
 //!    iteration limit;
 //! 3. [`Scp::generate_and_solve`] — linearise, build the working set,
@@ -28,7 +32,10 @@
 //! the ball, the point is a KKT point of the linearised problem (on a
 //! convex problem: its optimum) and goes to dense verification; otherwise
 //! the loop goes on (back to the active-set method if the step was not
-//! tiny). Clarabel's status and residuals go into the report's `final_qp`.
+//! tiny). A rejected step that Clarabel predicts to gain less than the
+//! optimality tolerance, inside the ball, certifies the point where it
+//! stands ([`Scp::stands`]). Clarabel's status and residuals go into the
+//! report's `final_qp`.
 
 use crate::optim::problem::phases::PhaseRows;
 use crate::optim::problem::Problem;
@@ -138,6 +145,13 @@ pub(in crate::optim) struct Scp<'a> {
     /// Never accept a step from a feasible iterate to an infeasible one
     /// ([`Scp::keeping_feasibility`]).
     keep_feasible: bool,
+    /// A dense verification has flagged phases in this run: later converged
+    /// iterates are screened before Clarabel certifies them
+    /// ([`Scp::screen`]).
+    dipped: bool,
+    /// The last screened iterate's weights and its clean verification,
+    /// kept for the answer when certification leaves the point where it is.
+    screened: Option<(DVector<f64>, Verification)>,
 }
 
 impl<'a> Scp<'a> {
@@ -176,6 +190,8 @@ impl<'a> Scp<'a> {
             generation: Generation::Thinned,
             proximal_weight: 0.0,
             keep_feasible: false,
+            dipped: false,
+            screened: None,
         }
     }
 
@@ -249,17 +265,20 @@ impl<'a> Scp<'a> {
         let (final_qp, unverified) = match &self.phase {
             Phase::Centre => (FinalQp::not_needed(), Phase::Descend),
             Phase::Certified(final_qp) => (final_qp.clone(), Phase::Certify),
+            _ if self.dipped && !self.screened_here() => return self.screen(),
             _ => {
-                self.phase = Phase::Certify;
-                self.radius = self.radius.max(self.problem.options.trust_region);
+                self.start_certifying();
                 return Flow::Continue;
             }
         };
         let p = self.problem;
-        let ctl = self.ctl;
-        let v = timed(&mut self.stats.verification_ms, || {
-            p.verifier().verify(&self.eval.w, ctl)
-        });
+        let v = match self.screened.take() {
+            Some((w, v)) if w == self.eval.w => {
+                self.stats.screens.1 += 1;
+                v
+            }
+            _ => self.verify_here(),
+        };
         if let Some(why) = v.interrupted {
             return self.stopped_early(why, Some(v));
         }
@@ -269,19 +288,8 @@ impl<'a> Scp<'a> {
             sol.report.final_qp = Some(final_qp);
             return Flow::Done(Box::new(sol));
         }
-        let (added, raised) = self.add_flagged(&v);
-        self.stats.added_phases += added;
-        tracing::debug!(
-            iteration = self.stats.iterations,
-            flagged = v.flagged.len(),
-            added,
-            raised,
-            deficit = clearance_deficit(self.problem.clearance_m, &v.report),
-            grid = self.rows.len(),
-            dense_clearance = v.report.min_clearance_m,
-            continuous_clearance = v.report.continuous_clearance_m,
-            "verification flagged phases"
-        );
+        self.dipped = true;
+        let (added, raised) = self.add_flagged(&v, "verification");
         if added + raised == 0 {
             let reason = "dense verification failed on a constraint the optimiser cannot refine (goal or equality)";
             return self.answer(
@@ -291,12 +299,71 @@ impl<'a> Scp<'a> {
                 &[],
             );
         }
+        self.reevaluate();
+        self.phase = unverified;
+        Flow::Continue
+    }
+
+    /// Step 1 once the run has dipped between its phases: a converged
+    /// feasible iterate is verified densely *before* Clarabel certifies it.
+    /// Flagged phases join, and the run goes on from the point as after a
+    /// failed verification (a Clarabel QP on the grown phase set, which
+    /// measured better than descending on the active-set method): the
+    /// certifying QPs that would have preceded that verification, two to
+    /// four at 5-10 ms on a MotionBenchMaker plan, are saved. A clean
+    /// point goes to certification, and keeps this verification if
+    /// certification leaves it where it is.
+    fn screen(&mut self) -> Flow {
+        self.stats.screens.0 += 1;
+        let p = self.problem;
+        let v = self.verify_here();
+        if let Some(why) = v.interrupted {
+            return self.stopped_early(why, Some(v));
+        }
+        let clean = v.flagged.is_empty() && p.is_feasible(&v.report);
+        if !clean {
+            let (added, raised) = self.add_flagged(&v, "screening");
+            if added + raised > 0 {
+                self.reevaluate();
+                self.start_certifying();
+                return Flow::Continue;
+            }
+        }
+        // Clean, or nothing left to refine: certification decides.
+        self.screened = Some((self.eval.w.clone(), v));
+        self.start_certifying();
+        Flow::Continue
+    }
+
+    /// Dense verification of the current iterate, timed.
+    fn verify_here(&mut self) -> Verification {
+        let (p, ctl, w) = (self.problem, self.ctl, &self.eval.w);
+        timed(&mut self.stats.verification_ms, || {
+            p.verifier().verify(w, ctl)
+        })
+    }
+
+    /// The next QP is Clarabel's certifying one, its ball at least the
+    /// initial radius.
+    fn start_certifying(&mut self) {
+        self.phase = Phase::Certify;
+        self.radius = self.radius.max(self.problem.options.trust_region);
+    }
+
+    /// Whether the current iterate is the last one screened.
+    fn screened_here(&self) -> bool {
+        self.screened
+            .as_ref()
+            .is_some_and(|(w, _)| *w == self.eval.w)
+    }
+
+    /// The iterate evaluated again on the (grown) optimisation phases.
+    fn reevaluate(&mut self) {
+        let (p, ctl) = (self.problem, self.ctl);
         let z = self.eval.z.clone();
         self.eval = timed(&mut self.stats.evaluation_ms, || {
             p.evaluate_grid(&self.rows, z, self.centre, ctl)
         });
-        self.phase = unverified;
-        Flow::Continue
     }
 
     /// Step 2: the caller's deadline / cancel flag and the iteration limit.
@@ -438,8 +505,34 @@ impl<'a> Scp<'a> {
                 let scale = 1.0 + merit_here.abs();
                 self.accept(next, predicted, actual, alpha, full_step, scale, &step.sol);
             }
-            None => self.shrink(full_step, step.sol.clarabel.as_ref()),
+            None => match self.stands(trial.predicted, merit_here, full_step, &step.sol) {
+                Some(final_qp) => {
+                    self.stats.rejected_steps += 1;
+                    self.phase = Phase::Certified(final_qp);
+                }
+                None => self.shrink(full_step, step.sol.clarabel.as_ref()),
+            },
         }
+    }
+
+    /// Whether a rejected certifying step certifies the point where it
+    /// stands: Clarabel's exact QP, its ball not holding it, predicts less
+    /// than the optimality tolerance from any step, so the point is a
+    /// minimiser of the linearised problem to that tolerance (the merit
+    /// test rejected a step worth less than it). Without this, the ball
+    /// shrank until it collapsed and certified the same point, "held by the
+    /// ball", after two to four more Clarabel QPs.
+    fn stands(
+        &self,
+        predicted: f64,
+        merit_here: f64,
+        full_step: f64,
+        sol: &QpSolution,
+    ) -> Option<FinalQp> {
+        let info = sol.clarabel.as_ref()?;
+        let free = full_step < BALL_ACTIVE_FRACTION * self.radius;
+        let small = predicted <= OPTIMALITY_TOLERANCE * (1.0 + merit_here.abs());
+        (self.certifying() && free && small).then(|| FinalQp::from(info, false))
     }
 
     /// An accepted step: move, adapt the radius, and decide convergence. A
@@ -558,8 +651,9 @@ impl<'a> Scp<'a> {
     /// [`MAX_MARGIN_STEP_M`] per round), so
     /// that a trajectory that dipped between the phases is held farther
     /// out there, not only at the phases; returns how many phases were new
-    /// and how many margins changed.
-    fn add_flagged(&mut self, v: &Verification) -> (usize, usize) {
+    /// and how many margins changed (`stage`, which step verified, is for
+    /// the log).
+    fn add_flagged(&mut self, v: &Verification, stage: &str) -> (usize, usize) {
         let p = self.problem;
         let deficit = clearance_deficit(p.clearance_m, &v.report).min(MAX_MARGIN_STEP_M);
         let rows = self.rows.to_mut();
@@ -570,7 +664,21 @@ impl<'a> Scp<'a> {
             let i = rows.push(&p.basis, &p.whitening, phase);
             raised += usize::from(rows.raise_margin(i, deficit, MAX_CLEARANCE_MARGIN_M));
         }
-        (rows.len() - before, raised)
+        let added = rows.len() - before;
+        self.stats.added_phases += added;
+        tracing::debug!(
+            stage,
+            iteration = self.stats.iterations,
+            flagged = v.flagged.len(),
+            added,
+            raised,
+            deficit = clearance_deficit(p.clearance_m, &v.report),
+            grid = self.rows.len(),
+            dense_clearance = v.report.min_clearance_m,
+            continuous_clearance = v.report.continuous_clearance_m,
+            "dense verification flagged phases"
+        );
+        (added, raised)
     }
 
     /// Finish as `max_iterations` because the caller stopped the solver;

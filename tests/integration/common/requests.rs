@@ -1,4 +1,5 @@
-//! Generated typical optimiser requests, as structs and as JSON bodies.
+//! Generated typical optimiser requests, as structs and as JSON bodies,
+//! and the committed problem sets.
 
 use dpmp::fixtures::{typical_request, ExampleSettings};
 use dpmp::optim::{optimize, OptimizeRequest, Status};
@@ -44,4 +45,17 @@ pub fn answer_with_threads(
         .unwrap();
     let resp = pool.install(|| optimize(req, robot)).unwrap();
     (resp.status, resp.deterministic_json())
+}
+
+/// Every problem file of a committed set (`problems/<set>/`), in name
+/// order.
+pub fn problem_set(set: &str) -> Vec<dpmp::bench::ProblemFile> {
+    let dir = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("problems")
+        .join(set);
+    dpmp::bench::load_dir(&dir)
+        .unwrap()
+        .into_iter()
+        .map(|(name, p)| p.unwrap_or_else(|e| panic!("{name}: {e}")))
+        .collect()
 }
