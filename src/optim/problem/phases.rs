@@ -155,6 +155,29 @@ pub struct PhaseRows {
     /// request's: zero, except where the verification found the trajectory
     /// too close between the phases ([`PhaseRows::raise_margin`]).
     margins: Vec<f64>,
+    /// Per joint, the columns of the whitening factor where its rows are
+    /// not zero ([`nonzero_columns`]): a row is computed on those only (a
+    /// smoothness prior's factor is block diagonal, a learned one lower
+    /// triangular).
+    columns: Vec<std::ops::Range<usize>>,
+}
+
+/// Per joint `j`, the smallest column range holding every non-zero entry
+/// of rows `j·n_basis .. (j+1)·n_basis` of `factor` (empty for zero rows).
+fn nonzero_columns(
+    factor: &nalgebra::DMatrix<f64>,
+    n_joints: usize,
+    n_basis: usize,
+) -> Vec<std::ops::Range<usize>> {
+    (0..n_joints)
+        .map(|j| {
+            let block = factor.rows(j * n_basis, n_basis);
+            let used = |c: &usize| block.column(*c).iter().any(|x| *x != 0.0);
+            let first = (0..block.ncols()).find(used).unwrap_or(0);
+            let end = (0..block.ncols()).rev().find(used).map_or(first, |c| c + 1);
+            first..end
+        })
+        .collect()
 }
 
 impl PhaseRows {
@@ -177,6 +200,7 @@ impl PhaseRows {
             rows: Default::default(),
             l1: Default::default(),
             margins: Vec::new(),
+            columns: nonzero_columns(whitening.factor(), n_joints, basis.n_basis()),
         };
         for &p in phases {
             rows.push(basis, whitening, p);
@@ -185,7 +209,8 @@ impl PhaseRows {
     }
 
     /// Add one phase (no-op when it is already present to 1e-12); returns
-    /// its index.
+    /// its index. `whitening` is the one [`PhaseRows::new`] was given (its
+    /// zero pattern is read there).
     pub fn push(&mut self, basis: &Basis, whitening: &Whitening, phase: f64) -> usize {
         if let Some(i) = self.phases.iter().position(|p| (p - phase).abs() < 1e-12) {
             return i;
@@ -199,7 +224,10 @@ impl PhaseRows {
             .enumerate()
         {
             for j in 0..self.n_joints {
-                let row = l.rows(j * nb, nb).tr_mul(&psi);
+                let cols = self.columns[j].clone();
+                let mut row = DVector::zeros(l.ncols());
+                row.rows_mut(cols.start, cols.len())
+                    .copy_from(&l.view((j * nb, cols.start), (nb, cols.len())).tr_mul(&psi));
                 self.l1[k].push(row.lp_norm(1));
                 self.rows[k].push(row);
             }
@@ -310,7 +338,8 @@ impl PhaseRows {
 mod tests {
     use super::*;
     use crate::fixtures::example_distribution;
-    use crate::promp::PrompConfig;
+    use crate::promp::{PrompConfig, WeightDistribution};
+    use nalgebra::DMatrix;
 
     #[test]
     fn a_phase_is_added_once_and_its_margin_rises_to_the_cap() {
@@ -333,6 +362,42 @@ mod tests {
             "a zero deficit changes nothing"
         );
         assert_eq!((rows.margin(0), rows.margin(1)), (0.0, 0.0));
+    }
+
+    /// Rows computed on the factor's non-zero columns only equal the full
+    /// product bit for bit, for a dense (lower-triangular) factor and a
+    /// block-diagonal one (independent joints), whose rows use only their
+    /// own joint's columns.
+    #[test]
+    fn rows_on_the_nonzero_columns_equal_the_full_product() {
+        let basis = Basis::new(&PrompConfig::default()).unwrap();
+        let nb = basis.n_basis();
+        let dense = example_distribution(&basis, 20, 5).unwrap();
+        let blocks: Vec<DMatrix<f64>> = (0..7)
+            .map(|j| dense.cov.view((j * nb, j * nb), (nb, nb)).into_owned())
+            .collect();
+        let means: Vec<DVector<f64>> = (0..7).map(|j| dense.mean.rows(j * nb, nb).into()).collect();
+        let diagonal = WeightDistribution::from_joint_blocks(&means, &blocks).unwrap();
+        for (dist, block_diagonal) in [(dense, false), (diagonal, true)] {
+            let wh = Whitening::new(&dist, Whitening::default_lambda(&dist)).unwrap();
+            let phases = [0.0, 0.17, 0.5, 0.93, 1.0];
+            let rows = PhaseRows::new(&basis, &wh, 7, (3.0, TimeWarp::Ramped), &phases);
+            for j in 0..7 {
+                let expected = if block_diagonal { j * nb } else { 0 }..(j + 1) * nb;
+                assert_eq!(rows.columns[j], expected, "joint {j}");
+            }
+            for d in Derivative::ALL {
+                for p in 0..phases.len() {
+                    for j in 0..7 {
+                        let full = wh
+                            .factor()
+                            .rows(j * nb, nb)
+                            .tr_mul(&rows.basis[d.order()][p]);
+                        assert_eq!(rows.row(d, p, j), &full, "{d:?} phase {p} joint {j}");
+                    }
+                }
+            }
+        }
     }
 
     #[test]
